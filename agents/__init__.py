@@ -1,0 +1,1 @@
+"""Agents: PPO helpers, planners, sim-to-real (installed as ``fignet_gym.agents``)."""

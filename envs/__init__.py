@@ -1,0 +1,1 @@
+"""Gymnasium environments (installed as ``fignet_gym.envs``)."""

@@ -1,0 +1,167 @@
+"""Quaternions, rigid transforms and batched shape matching (Kabsch), in torch.
+
+Quaternions are (w, x, y, z), MuJoCo's convention. Poses are ``float[..., 7]``: position then
+quaternion. See ``docs/architecture.md`` for the dimension glossary.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+
+class ShapeMatchError(RuntimeError):
+    """A rigid fit was requested on a degenerate point set (fewer than 3 non-collinear points)."""
+
+
+def quat_normalize(q: Tensor) -> Tensor:
+    """Unit quaternion with non-negative w. ``float[..., 4] -> float[..., 4]``."""
+    q = q / q.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    return torch.where(q[..., :1] < 0, -q, q)
+
+
+def quat_mul(a: Tensor, b: Tensor) -> Tensor:
+    """Hamilton product ``a * b``. ``float[..., 4] x float[..., 4] -> float[..., 4]``."""
+    aw, ax, ay, az = a.unbind(-1)
+    bw, bx, by, bz = b.unbind(-1)
+    return torch.stack(
+        (
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ),
+        dim=-1,
+    )
+
+
+def quat_conj(q: Tensor) -> Tensor:
+    """Conjugate (inverse of a unit quaternion). ``float[..., 4] -> float[..., 4]``."""
+    return q * q.new_tensor([1.0, -1.0, -1.0, -1.0])
+
+
+def quat_to_matrix(q: Tensor) -> Tensor:
+    """Rotation matrix of a unit quaternion. ``float[..., 4] -> float[..., 3, 3]``."""
+    w, x, y, z = q.unbind(-1)
+    return torch.stack(
+        (
+            1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+            2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+            2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+        ),
+        dim=-1,
+    ).reshape(*q.shape[:-1], 3, 3)
+
+
+def matrix_to_quat(m: Tensor) -> Tensor:
+    """Unit quaternion (w >= 0) of a rotation matrix. ``float[..., 3, 3] -> float[..., 4]``.
+
+    Uses the four-candidate method (pick the best-conditioned diagonal term) so that it is
+    accurate for every rotation, including 180 degrees.
+    """
+    m00, m11, m22 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
+    cand = torch.stack(
+        (
+            torch.stack((1 + m00 + m11 + m22, m[..., 2, 1] - m[..., 1, 2],
+                         m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]), -1),
+            torch.stack((m[..., 2, 1] - m[..., 1, 2], 1 + m00 - m11 - m22,
+                         m[..., 0, 1] + m[..., 1, 0], m[..., 0, 2] + m[..., 2, 0]), -1),
+            torch.stack((m[..., 0, 2] - m[..., 2, 0], m[..., 0, 1] + m[..., 1, 0],
+                         1 - m00 + m11 - m22, m[..., 1, 2] + m[..., 2, 1]), -1),
+            torch.stack((m[..., 1, 0] - m[..., 0, 1], m[..., 0, 2] + m[..., 2, 0],
+                         m[..., 1, 2] + m[..., 2, 1], 1 - m00 - m11 + m22), -1),
+        ),
+        dim=-2,
+    )  # [..., 4 candidates, 4]
+    diag = torch.stack((1 + m00 + m11 + m22, 1 + m00 - m11 - m22,
+                        1 - m00 + m11 - m22, 1 - m00 - m11 + m22), -1)
+    best = diag.argmax(-1, keepdim=True)
+    q = torch.gather(cand, -2, best[..., None].expand(*best.shape, 4)).squeeze(-2)
+    return quat_normalize(q)
+
+
+def quat_rotate(q: Tensor, v: Tensor) -> Tensor:
+    """Rotate vectors by unit quaternions. ``float[..., 4] x float[..., 3] -> float[..., 3]``."""
+    qv = q[..., 1:]
+    t = 2.0 * torch.cross(qv, v, dim=-1)
+    return v + q[..., :1] * t + torch.cross(qv, t, dim=-1)
+
+
+def transform_points(pose: Tensor, points: Tensor) -> Tensor:
+    """World positions of body-frame points. ``float[..., 7] x float[..., 3] -> float[..., 3]``."""
+    return pose[..., :3] + quat_rotate(pose[..., 3:], points)
+
+
+def quat_angle(a: Tensor, b: Tensor) -> Tensor:
+    """Geodesic angle (radians, in [0, pi]) between rotations. ``float[..., 4] x2 -> float[...]``."""
+    dot = (a * b).sum(-1).abs().clamp(max=1.0)
+    return 2.0 * torch.acos(dot)
+
+
+def axis_angle_to_quat(axis_angle: Tensor) -> Tensor:
+    """Quaternion of a rotation vector (axis times angle). ``float[..., 3] -> float[..., 4]``."""
+    angle = axis_angle.norm(dim=-1, keepdim=True)
+    half = 0.5 * angle
+    # sin(x/2)/x -> 1/2 as x -> 0; the series avoids 0/0.
+    scale = torch.where(angle > 1e-6, torch.sin(half) / angle.clamp_min(1e-12), 0.5 - angle**2 / 48)
+    return torch.cat((torch.cos(half), axis_angle * scale), dim=-1)
+
+
+def quat_to_axis_angle(q: Tensor) -> Tensor:
+    """Rotation vector of a unit quaternion (shortest rotation). ``float[..., 4] -> float[..., 3]``."""
+    q = quat_normalize(q)
+    sin_half = q[..., 1:].norm(dim=-1, keepdim=True)
+    angle = 2.0 * torch.atan2(sin_half, q[..., :1])
+    scale = torch.where(sin_half > 1e-7, angle / sin_half.clamp_min(1e-12), 2.0 / q[..., :1])
+    return q[..., 1:] * scale
+
+
+def kabsch(
+    reference: Tensor, target: Tensor, segment: Tensor, num_segments: int,
+    weights: Tensor | None = None, min_singular: float = 1e-9,
+) -> tuple[Tensor, Tensor]:
+    """Best rigid fit of each segment's reference points onto its target points.
+
+    Args:
+        reference: ``float[N, 3]`` points in each object's body frame.
+        target: ``float[N, 3]`` the same points, observed (or predicted) in the world.
+        segment: ``int64[N]`` object index of each point, in ``[0, num_segments)``.
+        num_segments: ``O``.
+        weights: optional ``float[N]`` non-negative point weights.
+        min_singular: the second singular value of a segment's covariance below which the fit is
+            ambiguous (collinear points); such a segment raises ``ShapeMatchError``.
+
+    Returns:
+        ``(pose float[O, 7], residual float[O])``: the pose maps reference onto target
+        (``target ~= transform_points(pose, reference)``), and the RMS fit residual. The rotation is
+        a proper rotation (determinant +1): reflections are corrected, not returned.
+    """
+    dev, dt = reference.device, reference.dtype
+    w = torch.ones(reference.shape[0], device=dev, dtype=dt) if weights is None else weights
+    wsum = torch.zeros(num_segments, device=dev, dtype=dt).index_add_(0, segment, w)
+    if bool((wsum <= 0).any()):
+        raise ShapeMatchError("kabsch: an object has no points to fit")
+    c_ref = torch.zeros(num_segments, 3, device=dev, dtype=dt).index_add_(
+        0, segment, reference * w[:, None]) / wsum[:, None]
+    c_tgt = torch.zeros(num_segments, 3, device=dev, dtype=dt).index_add_(
+        0, segment, target * w[:, None]) / wsum[:, None]
+    p = reference - c_ref[segment]
+    q = target - c_tgt[segment]
+    cov = torch.zeros(num_segments, 3, 3, device=dev, dtype=dt).index_add_(
+        0, segment, (w[:, None, None] * p[:, :, None] * q[:, None, :]))
+    # SVD in float64: covariance of small objects (cm scale) is ~1e-4 and float32 loses the yaw.
+    u, s, vh = torch.linalg.svd(cov.double())
+    scale = s[:, :1].clamp_min(1e-30)
+    if bool((s[:, 1] / scale[:, 0] < min_singular).any()):
+        bad = torch.nonzero(s[:, 1] / scale[:, 0] < min_singular).flatten().tolist()
+        raise ShapeMatchError(f"kabsch: degenerate (collinear) point sets for objects {bad}")
+    d = torch.sign(torch.linalg.det(vh.transpose(-1, -2) @ u.transpose(-1, -2)))
+    d = torch.where(d == 0, torch.ones_like(d), d)
+    corr = torch.diag_embed(torch.stack((torch.ones_like(d), torch.ones_like(d), d), -1))
+    rot = (vh.transpose(-1, -2) @ corr @ u.transpose(-1, -2)).to(dt)
+    trans = c_tgt - (rot @ c_ref[:, :, None])[:, :, 0]
+    fitted = (rot[segment] @ reference[:, :, None])[:, :, 0] + trans[segment]
+    sq = torch.zeros(num_segments, device=dev, dtype=dt).index_add_(
+        0, segment, w * ((fitted - target) ** 2).sum(-1))
+    residual = (sq / wsum).sqrt()
+    return torch.cat((trans, matrix_to_quat(rot)), dim=-1), residual

@@ -1,0 +1,18 @@
+# Sourced by demo.sh and test.sh: create or reuse .venv and install what the project needs.
+# torch is pinned to 2.13.0 here (a CPU wheel that lies on the reference machines' disk); the
+# project's own range stays open for users elsewhere.
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="${FIGNET_GYM_VENV:-$ROOT/.venv}"
+PY="$VENV/bin/python"
+if [ ! -x "$PY" ]; then
+  python3 -m venv "$VENV"
+fi
+STAMP="$VENV/.fignet_gym_installed"
+if [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ]; then
+  "$PY" -m pip install --quiet --upgrade pip
+  "$PY" -m pip install --quiet "torch==2.13.0"
+  "$PY" -m pip install --quiet -e "$ROOT[dev]"
+  touch "$STAMP"
+fi
+export MUJOCO_GL="${MUJOCO_GL:-egl}"
