@@ -82,7 +82,7 @@ def matrix_to_quat(m: Tensor) -> Tensor:
 
 def quat_rotate(q: Tensor, v: Tensor) -> Tensor:
     """Rotate vectors by unit quaternions. ``float[..., 4] x float[..., 3] -> float[..., 3]``."""
-    qv = q[..., 1:]
+    qv, v = torch.broadcast_tensors(q[..., 1:], v)
     t = 2.0 * torch.cross(qv, v, dim=-1)
     return v + q[..., :1] * t + torch.cross(qv, t, dim=-1)
 

@@ -1,0 +1,183 @@
+"""Typed graph containers and FIGNet's input features (paper Sec. 3.1.1 and App. C.1.1).
+
+Every feature is relative (differences of positions, never positions), so the model is
+translation-equivariant. Each spatial vector ``d`` is followed by its norm ``|d|`` (App. C.2).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from fignet_gym.collision import FaceContacts
+from fignet_gym.scene import ObjectKind, Scene
+
+
+@dataclass(frozen=True)
+class EdgeSet:
+    """Directed edges of one type: ``senders``/``receivers`` ``int64[E]``, ``features`` ``float[E, D]``."""
+
+    senders: Tensor
+    receivers: Tensor
+    features: Tensor
+
+
+@dataclass(frozen=True)
+class FaceEdgeSet:
+    """Face-face hyper-edges: ``senders``/``receivers`` ``int64[C, 3]`` node indices, each face's
+    nodes sorted by distance to its closest point; ``features`` ``float[C, D]``."""
+
+    senders: Tensor
+    receivers: Tensor
+    features: Tensor
+
+
+@dataclass(frozen=True)
+class Graph:
+    """One (possibly batched) FIGNet input graph.
+
+    Attributes:
+        node_features: ``float[N, Dn]`` mesh nodes.
+        object_features: ``float[O, Do]`` object nodes (at the centre of mass).
+        node_object: ``int64[N]`` object of each mesh node (object-mesh and mesh-object edges).
+        obj_mesh_features: ``float[N, De]`` object->mesh edge features (one per mesh node).
+        mesh_obj_features: ``float[N, De]`` mesh->object edge features (one per mesh node).
+        mesh_edges: mesh edges within objects.
+        face_edges: face-face collision hyper-edges.
+        node_edges: node-node collision edges (MeshGraphNets baseline), else empty.
+    """
+
+    node_features: Tensor
+    object_features: Tensor
+    node_object: Tensor
+    obj_mesh_features: Tensor
+    mesh_obj_features: Tensor
+    mesh_edges: EdgeSet
+    face_edges: FaceEdgeSet
+    node_edges: EdgeSet
+
+    def edge_features(self, name: str) -> Tensor:
+        """Features of the edge type ``name`` (mesh, obj_mesh, mesh_obj, face, world)."""
+        return {
+            "mesh": lambda: self.mesh_edges.features,
+            "obj_mesh": lambda: self.obj_mesh_features,
+            "mesh_obj": lambda: self.mesh_obj_features,
+            "face": lambda: self.face_edges.features,
+            "world": lambda: self.node_edges.features,
+        }[name]()
+
+    def with_features(self, **feats: Tensor) -> Graph:
+        """The same topology with some feature tensors replaced (used for normalisation)."""
+        fields = dict(self.__dict__)
+        for key, val in feats.items():
+            if key in ("mesh", "face", "world"):
+                name = {"mesh": "mesh_edges", "face": "face_edges", "world": "node_edges"}[key]
+                fields[name] = type(fields[name])(fields[name].senders, fields[name].receivers, val)
+            else:
+                fields[key] = val
+        return Graph(**fields)
+
+
+def with_norm(d: Tensor) -> Tensor:
+    """Append the norm of each 3-vector: ``float[..., k*3] -> float[..., k*4]`` as ``[d, |d|]`` blocks."""
+    d3 = d.reshape(*d.shape[:-1], -1, 3)
+    return torch.cat((d3, d3.norm(dim=-1, keepdim=True)), dim=-1).reshape(*d.shape[:-1], -1)
+
+
+def feature_sizes(history: int, num_props: int = 3) -> dict[str, int]:
+    """Input feature sizes of each graph element for ``history`` velocities."""
+    node = 4 * history + num_props + 1 + 4
+    return {"node": node, "object": node, "mesh": 8, "obj_mesh": 8, "face": 4 * 7 + 6, "world": 4}
+
+
+def _node_features(pos_hist: Tensor, kin: Tensor, kin_disp: Tensor, props: Tensor) -> Tensor:
+    """``[velocities (+norms), props, kinematic flag, next kinematic displacement (+norm)]``.
+
+    ``pos_hist float[H, X, 3]``, ``kin float[X]``, ``kin_disp float[X, 3]``, ``props float[X, P]``.
+    """
+    vel = pos_hist[1:] - pos_hist[:-1]  # [H-1, X, 3], oldest first
+    vel = vel.flip(0).permute(1, 0, 2).reshape(pos_hist.shape[1], -1)  # newest first
+    return torch.cat((with_norm(vel), props, kin[:, None], with_norm(kin_disp * kin[:, None])), dim=-1)
+
+
+def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts) -> tuple[Tensor, Tensor, Tensor]:
+    """Face-face hyper-edge features (paper eq. 1) with each face's nodes sorted by distance.
+
+    Args:
+        pos: ``float[N, 3]`` current node positions.
+        faces: ``int64[F, 3]``.
+        contacts: ``C`` directed face pairs with closest points.
+
+    Returns:
+        ``(senders int64[C, 3], receivers int64[C, 3], features float[C, 34])`` with features
+        ``[d_rs, |d_rs|, (d_sj, |d_sj|)_j, (d_rj, |d_rj|)_j, n_s, n_r]``.
+    """
+    def sorted_face(face_idx: Tensor, point: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        nodes = faces[face_idx]  # [C, 3]
+        x = pos[nodes]  # [C, 3, 3]
+        # Normal from the original vertex order (outward by the mesh's winding), before sorting.
+        n = torch.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0], dim=-1)
+        n = n / n.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        span = x - point[:, None, :]
+        order = span.norm(dim=-1).argsort(dim=1, stable=True)
+        nodes = torch.gather(nodes, 1, order)
+        span = torch.gather(span, 1, order[..., None].expand(-1, -1, 3))
+        return nodes, span.reshape(-1, 9), n
+
+    s_nodes, s_span, n_s = sorted_face(contacts.sender_face, contacts.sender_point)
+    r_nodes, r_span, n_r = sorted_face(contacts.receiver_face, contacts.receiver_point)
+    d_rs = contacts.receiver_point - contacts.sender_point
+    feats = torch.cat((with_norm(d_rs), with_norm(s_span), with_norm(r_span), n_s, n_r), dim=-1)
+    return s_nodes, r_nodes, feats
+
+
+def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Tensor,
+                com_next: Tensor, contacts: FaceContacts | None,
+                node_edges: tuple[Tensor, Tensor] | None = None) -> Graph:
+    """Assemble all un-normalised input features.
+
+    Args:
+        scene: static topology (``N`` nodes, ``O`` objects).
+        node_hist: ``float[H, N, 3]`` node positions, oldest first (last = current).
+        com_hist: ``float[H, O, 3]`` centre-of-mass positions, oldest first.
+        node_next: ``float[N, 3]`` next positions (used for kinematic nodes only).
+        com_next: ``float[O, 3]`` next centre-of-mass positions (kinematic objects only).
+        contacts: face-face contacts at the current positions (``None``: no face edges).
+        node_edges: optional MeshGraphNets-style node-node collision edges ``(senders, receivers)``.
+    """
+    kin_obj = (scene.object_kind != ObjectKind.DYNAMIC).to(node_hist.dtype)
+    kin_node = kin_obj[scene.node_object]
+    props = scene.object_props
+    cur, cur_com = node_hist[-1], com_hist[-1]
+    node_f = _node_features(node_hist, kin_node, node_next - cur, props[scene.node_object])
+    obj_f = _node_features(com_hist, kin_obj, com_next - cur_com, props)
+
+    s, r = scene.mesh_edges
+    mesh_f = torch.cat((with_norm(cur[s] - cur[r]),
+                        with_norm(scene.ref_vertices[s] - scene.ref_vertices[r])), dim=-1)
+    rel = cur - cur_com[scene.node_object]
+    rel_ref = scene.ref_vertices - scene.object_com[scene.node_object]
+    # Object->mesh: d = x_sender(object) - x_receiver(node); mesh->object is its negation.
+    om_f = torch.cat((with_norm(-rel), with_norm(-rel_ref)), dim=-1)
+    mo_f = torch.cat((with_norm(rel), with_norm(rel_ref)), dim=-1)
+
+    empty_i = torch.zeros(0, dtype=torch.long, device=cur.device)
+    if contacts is not None:
+        fs, fr, ff = face_edge_features(cur, scene.faces, contacts)
+    else:
+        fs = fr = empty_i.reshape(0, 3)
+        ff = cur.new_zeros(0, feature_sizes(1)["face"])
+    if node_edges is not None:
+        ns, nr = node_edges
+        nf = with_norm(cur[ns] - cur[nr])
+    else:
+        ns = nr = empty_i
+        nf = cur.new_zeros(0, 4)
+    return Graph(
+        node_features=node_f, object_features=obj_f, node_object=scene.node_object,
+        obj_mesh_features=om_f, mesh_obj_features=mo_f,
+        mesh_edges=EdgeSet(s, r, mesh_f), face_edges=FaceEdgeSet(fs, fr, ff),
+        node_edges=EdgeSet(ns, nr, nf),
+    )

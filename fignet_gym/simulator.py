@@ -1,0 +1,333 @@
+"""The learned simulator: graph network + normalisation + integration + shape matching.
+
+Everything physical lives here (as in DeepMind's learning_to_simulate): input features, the
+second-order Euler integrator and its exact inverse used to build training targets, the training
+noise and how it cancels in the target, and shape matching that turns predicted node positions back
+into rigid poses.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import Tensor, nn
+
+from fignet_gym.collision import FaceContacts, find_face_contacts
+from fignet_gym.geometry import axis_angle_to_quat, kabsch, quat_mul, quat_normalize, quat_rotate
+from fignet_gym.graph import Graph, build_graph, feature_sizes
+from fignet_gym.networks import EncodeProcessDecode
+from fignet_gym.normalization import Normalizer
+from fignet_gym.scene import MeshOptions, Scene
+
+CHECKPOINT_FORMAT = "fignet_gym.checkpoint/1"
+
+
+class CheckpointError(ValueError):
+    """A checkpoint file is missing, corrupt, foreign, or does not match the requested model."""
+
+
+@dataclass(frozen=True)
+class SimulatorConfig:
+    """Everything that defines a learned simulator (saved in every checkpoint).
+
+    Attributes:
+        dt: learned step length (s); a property of the training data.
+        history: number of finite-difference velocities in the node features (``H = history + 1`` poses).
+        latent_size: width of every latent vector.
+        hidden_size: width of MLP hidden layers (``None``: ``latent_size``).
+        message_passing_steps: processor blocks (unshared weights).
+        mesh_edges: use mesh-mesh edges (FIGNet* drops them for speed).
+        object_nodes: use one virtual node per object.
+        collision: ``"face"`` (FIGNet face-face hyper-edges) or ``"node"`` (MeshGraphNets node-node).
+        collision_radius: ``d_c`` (m).
+        noise_std: std (m) of the random-walk training noise at the last input frame.
+        vertical_weight: loss weight of the z component of accelerations (1: the paper's plain MSE).
+        scene_type: what the model was trained on ("push", "toss", ...; "" = unspecified).
+        mesh_options: how MuJoCo primitives are meshed for this model.
+    """
+
+    dt: float = 0.02
+    history: int = 2
+    latent_size: int = 128
+    hidden_size: int | None = None
+    message_passing_steps: int = 10
+    mesh_edges: bool = True
+    object_nodes: bool = True
+    collision: str = "face"
+    collision_radius: float = 0.02
+    noise_std: float = 0.0
+    vertical_weight: float = 1.0
+    scene_type: str = ""
+    mesh_options: MeshOptions = field(default_factory=MeshOptions)
+
+    def __post_init__(self) -> None:
+        if self.collision not in ("face", "node"):
+            raise ValueError(f"collision must be 'face' or 'node', got {self.collision!r}")
+        if self.history < 1 or self.dt <= 0 or self.collision_radius <= 0:
+            raise ValueError("history >= 1, dt > 0 and collision_radius > 0 are required")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-type dictionary (safe for ``torch.load(weights_only=True)``)."""
+        return asdict(self)
+
+    @staticmethod
+    def from_dict(d: dict[str, Any]) -> SimulatorConfig:
+        """Inverse of :meth:`to_dict`; unknown keys are an error."""
+        known = {f.name for f in fields(SimulatorConfig)}
+        unknown = set(d) - known
+        if unknown:
+            raise CheckpointError(f"unknown config keys {sorted(unknown)}")
+        d = dict(d)
+        if isinstance(d.get("mesh_options"), dict):
+            d["mesh_options"] = MeshOptions(**d["mesh_options"])
+        return SimulatorConfig(**d)
+
+
+@dataclass(frozen=True)
+class StepInputs:
+    """Positions a step is computed from: ``node_hist float[H, N, 3]``, ``com_hist float[H, O, 3]``."""
+
+    graph: Graph
+    node_hist: Tensor
+    contacts: FaceContacts | None
+
+
+class LearnedSimulator(nn.Module):
+    """FIGNet as a simulator: ``step(scene, history, next_kinematic) -> next poses``."""
+
+    def __init__(self, config: SimulatorConfig | None = None) -> None:
+        super().__init__()
+        self.config = config or SimulatorConfig()
+        c = self.config
+        sizes = feature_sizes(c.history)
+        face, node = c.collision == "face", c.collision == "node"
+        self.net = EncodeProcessDecode(
+            sizes, latent=c.latent_size, hidden=c.hidden_size or c.latent_size,
+            steps=c.message_passing_steps, mesh_edges=c.mesh_edges, object_nodes=c.object_nodes,
+            face_edges=face, node_edges=node)
+        self.norms = nn.ModuleDict({k: Normalizer(v) for k, v in sizes.items()})
+        self.norms["mesh_obj"] = Normalizer(sizes["obj_mesh"])
+        self.target_norm = Normalizer(3)
+
+    @property
+    def device(self) -> torch.device:
+        return next(self.parameters()).device
+
+    # ------------------------------------------------------------------ inputs
+    def build_inputs(self, scene: Scene, history: Tensor, next_kinematic: Tensor) -> StepInputs:
+        """Graph of raw features from poses ``history float[H, O, 7]`` and ``next_kinematic float[O, 7]``."""
+        H = self.config.history + 1
+        if history.shape[0] != H or history.shape[1:] != (scene.num_objects, 7):
+            raise ValueError(f"history must be float[{H}, {scene.num_objects}, 7], got {tuple(history.shape)}")
+        node_hist = scene.node_positions(history)
+        com_hist = scene.com_positions(history)
+        node_next = scene.node_positions(next_kinematic)
+        com_next = scene.com_positions(next_kinematic)
+        contacts, node_edges = None, None
+        if self.config.collision == "face":
+            contacts = find_face_contacts(node_hist[-1], scene.faces, scene.face_object,
+                                          scene.collision_pairs, self.config.collision_radius)
+        else:
+            node_edges = node_collision_edges(scene, node_hist[-1], self.config.collision_radius)
+        graph = build_graph(scene, node_hist, com_hist, node_next, com_next, contacts, node_edges)
+        return StepInputs(graph, node_hist, contacts)
+
+    def normalize(self, g: Graph, accumulate: bool = False) -> Graph:
+        """Normalise every feature tensor (accumulating statistics when training)."""
+        n = self.norms
+        return g.with_features(
+            node_features=n["node"](g.node_features, accumulate),
+            object_features=n["object"](g.object_features, accumulate),
+            obj_mesh_features=n["obj_mesh"](g.obj_mesh_features, accumulate),
+            mesh_obj_features=n["mesh_obj"](g.mesh_obj_features, accumulate),
+            mesh=n["mesh"](g.mesh_edges.features, accumulate),
+            face=n["face"](g.face_edges.features, accumulate),
+            world=n["world"](g.node_edges.features, accumulate),
+        )
+
+    # ------------------------------------------------------------------ inference
+    def predict_acceleration(self, graph: Graph) -> Tensor:
+        """Per-node finite-difference acceleration (m per step^2), ``float[N, 3]``."""
+        return self.target_norm.inverse(self.net(self.normalize(graph)))
+
+    @torch.no_grad()
+    def step(self, scene: Scene, history: Tensor, next_kinematic: Tensor) -> Tensor:
+        """One learned step.
+
+        Args:
+            scene: static topology (a single scene or a batch, :meth:`Scene.repeat`).
+            history: ``float[H, O, 7]`` past poses, oldest first, last = current.
+            next_kinematic: ``float[O, 7]`` next poses of non-dynamic objects (rows of dynamic
+                objects are ignored).
+
+        Returns:
+            ``float[O, 7]`` next poses: dynamic objects by shape matching the predicted node
+            positions, the others copied from ``next_kinematic``.
+        """
+        return self.step_with_info(scene, history, next_kinematic)[0]
+
+    @torch.no_grad()
+    def step_with_info(self, scene: Scene, history: Tensor, next_kinematic: Tensor
+                       ) -> tuple[Tensor, StepInputs, Tensor]:
+        """:meth:`step` that also returns its inputs and the shape-matching residual ``float[O]`` (m)."""
+        inputs = self.build_inputs(scene, history, next_kinematic)
+        acc = self.predict_acceleration(inputs.graph)
+        x_t, x_prev = inputs.node_hist[-1], inputs.node_hist[-2]
+        pred = 2 * x_t - x_prev + acc
+        dyn = scene.dynamic_mask
+        # Non-dynamic nodes take their given positions so their (ignored) fit is well posed.
+        node_next = scene.node_positions(next_kinematic)
+        pred = torch.where(dyn[scene.node_object][:, None], pred, node_next)
+        poses, residual = kabsch(scene.ref_vertices, pred, scene.node_object, scene.num_objects)
+        out = torch.where(dyn[:, None], poses, next_kinematic)
+        return out, inputs, residual
+
+    @torch.no_grad()
+    def rollout(self, scene: Scene, history: Tensor, kinematic: Tensor) -> Tensor:
+        """Autoregressive rollout: ``history float[H, O, 7]``, ``kinematic float[T, O, 7]`` (next
+        poses of non-dynamic objects for each of ``T`` steps) -> ``float[T, O, 7]``."""
+        hist = history.clone()
+        out = []
+        for t in range(kinematic.shape[0]):
+            nxt = self.step(scene, hist, kinematic[t])
+            out.append(nxt)
+            hist = torch.cat((hist[1:], nxt[None]), dim=0)
+        return torch.stack(out)
+
+    # ------------------------------------------------------------------ training
+    def training_example(self, scene: Scene, poses: Tensor, generator: torch.Generator | None = None
+                         ) -> tuple[Graph, Tensor, Tensor]:
+        """Noisy inputs and the acceleration target for one-step supervision.
+
+        Args:
+            scene: topology.
+            poses: ``float[H + 1, O, 7]`` true poses; the last row is the target step.
+            generator: random source for the training noise.
+
+        Returns:
+            ``(graph, target float[N, 3], node_weight float[N])``: raw features, the acceleration
+            that maps the noisy inputs onto the true next positions (plus the last frame's noise,
+            which no model can see), and a per-node loss weight (0 for non-dynamic nodes).
+        """
+        hist, nxt = poses[:-1], poses[-1]
+        noisy = self._pose_noise(scene, hist, generator) if self.config.noise_std > 0 else hist
+        inputs = self.build_inputs(scene, noisy, nxt)
+        x_true_t = scene.node_positions(hist[-1])
+        noise_last = inputs.node_hist[-1] - x_true_t
+        # The model cannot know the last frame's noise, so the target keeps it; what it must learn
+        # is to undo the velocity noise (as in learning_to_simulate).
+        target_next = scene.node_positions(nxt) + noise_last
+        target = target_next - 2 * inputs.node_hist[-1] + inputs.node_hist[-2]
+        weight = scene.dynamic_mask[scene.node_object].to(target.dtype)
+        return inputs.graph, target, weight
+
+    def _pose_noise(self, scene: Scene, hist: Tensor, gen: torch.Generator | None) -> Tensor:
+        """Rigid random-walk noise on dynamic objects' poses: ``float[H, O, 7] -> float[H, O, 7]``.
+
+        Noise is rigid (a translation and a rotation about the centre of mass per object and frame)
+        because rollouts are shape matched: the errors a model meets at test time are rigid too.
+        The rotation's std is ``noise_std / radius`` so that node displacements are ``~noise_std``.
+        """
+        H, O = hist.shape[0], hist.shape[1]
+        sigma = self.config.noise_std / math.sqrt(max(H - 1, 1))
+        dev, dt = hist.device, hist.dtype
+        dtrans = torch.randn(H - 1, O, 3, generator=gen, device=dev, dtype=dt) * sigma
+        radius = self._object_radius(scene)
+        drot = torch.randn(H - 1, O, 3, generator=gen, device=dev, dtype=dt) * (sigma / radius)[:, None]
+        zero = torch.zeros(1, O, 3, device=dev, dtype=dt)
+        trans = torch.cat((zero, dtrans.cumsum(0)), 0)
+        rotvec = torch.cat((zero, drot.cumsum(0)), 0)
+        mask = scene.dynamic_mask[None, :, None].to(dt)
+        trans, rotvec = trans * mask, rotvec * mask
+        dq = axis_angle_to_quat(rotvec)
+        com = scene.com_positions(hist)
+        q_new = quat_normalize(quat_mul(dq, hist[..., 3:]))
+        # Rotate about the centre of mass: com stays, body origin moves with the rotation.
+        p_new = com + quat_rotate(dq, hist[..., :3] - com) + trans
+        return torch.cat((p_new, q_new), dim=-1)
+
+    def _object_radius(self, scene: Scene) -> Tensor:
+        """RMS distance ``float[O]`` of each object's nodes from its centre of mass."""
+        d2 = ((scene.ref_vertices - scene.object_com[scene.node_object]) ** 2).sum(-1)
+        s = torch.zeros(scene.num_objects, device=d2.device).index_add_(0, scene.node_object, d2)
+        n = torch.zeros(scene.num_objects, device=d2.device).index_add_(
+            0, scene.node_object, torch.ones_like(d2))
+        return (s / n.clamp_min(1)).sqrt().clamp_min(1e-4)
+
+    def loss(self, graph: Graph, target: Tensor, weight: Tensor, accumulate: bool = True) -> Tensor:
+        """Weighted MSE of normalised accelerations over dynamic nodes (scalar)."""
+        if accumulate:
+            self.target_norm.accumulate(target[weight > 0])
+        pred = self.net(self.normalize(graph, accumulate))
+        err = (pred - self.target_norm(target)) ** 2
+        comp = err.new_tensor([1.0, 1.0, self.config.vertical_weight])
+        return (err * comp).sum(-1).mul(weight).sum() / (weight.sum() * comp.sum()).clamp_min(1.0)
+
+    # ------------------------------------------------------------------ checkpoints
+    def save(self, path: str | Path, meta: dict[str, Any] | None = None) -> None:
+        """Write weights, normalisers and config atomically (temporary file, then rename)."""
+        path = Path(path)
+        tmp = path.with_name(path.name + ".tmp")
+        torch.save({"format": CHECKPOINT_FORMAT, "config": self.config.to_dict(),
+                    "state_dict": self.state_dict(), "meta": meta or {}}, tmp)
+        tmp.replace(path)
+
+    @staticmethod
+    def load(path: str | Path, map_location: str | torch.device = "cpu") -> LearnedSimulator:
+        """Load a checkpoint written by :meth:`save` (never executes code: ``weights_only=True``)."""
+        sim, _ = LearnedSimulator.load_with_meta(path, map_location)
+        return sim
+
+    @staticmethod
+    def load_with_meta(path: str | Path, map_location: str | torch.device = "cpu"
+                       ) -> tuple[LearnedSimulator, dict[str, Any]]:
+        """:meth:`load` that also returns the checkpoint's metadata dictionary."""
+        path = Path(path)
+        if not path.is_file():
+            raise CheckpointError(f"{path}: no such checkpoint file")
+        try:
+            blob = torch.load(path, map_location=map_location, weights_only=True)
+        except Exception as exc:  # noqa: BLE001 - any unpickling failure means a bad file
+            raise CheckpointError(f"{path}: not a readable fignet_gym checkpoint ({exc})") from exc
+        if not isinstance(blob, dict) or blob.get("format") != CHECKPOINT_FORMAT:
+            raise CheckpointError(f"{path}: not a fignet_gym checkpoint (format tag missing)")
+        config = SimulatorConfig.from_dict(blob["config"])
+        sim = LearnedSimulator(config)
+        try:
+            sim.load_state_dict(blob["state_dict"])
+        except RuntimeError as exc:
+            raise CheckpointError(f"{path}: weights do not match its config ({exc})") from exc
+        sim.to(map_location).eval()
+        return sim, dict(blob.get("meta", {}))
+
+    def with_config(self, **changes: Any) -> SimulatorConfig:
+        """A copy of this simulator's config with some fields changed."""
+        return replace(self.config, **changes)
+
+
+def node_collision_edges(scene: Scene, pos: Tensor, radius: float) -> tuple[Tensor, Tensor]:
+    """MeshGraphNets "world edges": node pairs of candidate object pairs closer than ``radius``.
+
+    ``pos float[N, 3] -> (senders int64[W], receivers int64[W])``, both directions. Vectorised over
+    all candidate node pairs (fine for the baselines' scene sizes).
+    """
+    pairs = scene.collision_pairs
+    if pairs.shape[0] == 0:
+        empty = torch.zeros(0, dtype=torch.long, device=pos.device)
+        return empty, empty
+    counts = torch.bincount(scene.node_object, minlength=scene.num_objects)
+    starts = torch.cumsum(counts, 0) - counts  # nodes are contiguous per object
+    ca, cb = counts[pairs[:, 0]], counts[pairs[:, 1]]
+    per_pair = ca * cb
+    pair_id = torch.repeat_interleave(torch.arange(pairs.shape[0], device=pos.device), per_pair)
+    offset = torch.arange(int(per_pair.sum()), device=pos.device) - torch.repeat_interleave(
+        torch.cumsum(per_pair, 0) - per_pair, per_pair)
+    a = starts[pairs[pair_id, 0]] + offset // cb[pair_id]
+    b = starts[pairs[pair_id, 1]] + offset % cb[pair_id]
+    close = ((pos[a] - pos[b]) ** 2).sum(-1) < radius**2
+    a, b = a[close], b[close]
+    return torch.cat((a, b)), torch.cat((b, a))
