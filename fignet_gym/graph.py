@@ -82,8 +82,9 @@ class Graph:
 
 def with_norm(d: Tensor) -> Tensor:
     """Append the norm of each 3-vector: ``float[..., k*3] -> float[..., k*4]`` as ``[d, |d|]`` blocks."""
-    d3 = d.reshape(*d.shape[:-1], -1, 3)
-    return torch.cat((d3, d3.norm(dim=-1, keepdim=True)), dim=-1).reshape(*d.shape[:-1], -1)
+    d3 = d.reshape(*d.shape[:-1], d.shape[-1] // 3, 3)
+    out = torch.cat((d3, d3.norm(dim=-1, keepdim=True)), dim=-1)
+    return out.reshape(*d.shape[:-1], d3.shape[-2] * 4)
 
 
 def feature_sizes(history: int, num_props: int = 3) -> dict[str, int]:
