@@ -258,14 +258,20 @@ class LearnedSimulator(nn.Module):
             0, scene.node_object, torch.ones_like(d2))
         return (s / n.clamp_min(1)).sqrt().clamp_min(1e-4)
 
-    def loss(self, graph: Graph, target: Tensor, weight: Tensor, accumulate: bool = True) -> Tensor:
-        """Weighted MSE of normalised accelerations over dynamic nodes (scalar)."""
+    def loss(self, graph: Graph, target: Tensor, weight: Tensor, accumulate: bool = True
+             ) -> tuple[Tensor, Tensor]:
+        """Weighted MSE of normalised accelerations over dynamic nodes.
+
+        Returns ``(loss scalar, normalised prediction float[N, 3])`` so that callers can add terms
+        without running the network twice.
+        """
         if accumulate:
             self.target_norm.accumulate(target[weight > 0])
         pred = self.net(self.normalize(graph, accumulate))
         err = (pred - self.target_norm(target)) ** 2
         comp = err.new_tensor([1.0, 1.0, self.config.vertical_weight])
-        return (err * comp).sum(-1).mul(weight).sum() / (weight.sum() * comp.sum()).clamp_min(1.0)
+        loss = (err * comp).sum(-1).mul(weight).sum() / (weight.sum() * comp.sum()).clamp_min(1.0)
+        return loss, pred
 
     # ------------------------------------------------------------------ checkpoints
     def save(self, path: str | Path, meta: dict[str, Any] | None = None) -> None:

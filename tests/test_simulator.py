@@ -180,7 +180,7 @@ def test_overfits_one_short_mujoco_trajectory(push_like_xml: str) -> None:
     losses = []
     for _ in range(250):
         opt.zero_grad()
-        loss = sim.loss(graph, target, weight, accumulate=len(losses) < 5)
+        loss, _ = sim.loss(graph, target, weight, accumulate=len(losses) < 5)
         loss.backward()
         opt.step()
         losses.append(loss.item())

@@ -1,0 +1,89 @@
+"""``fignet-gym`` command line: demo, bench, train, evaluate, and the data commands."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+
+
+def _train(args: argparse.Namespace) -> int:
+    from fignet_gym.training import train_from_files
+
+    overrides = dict(json.loads(args.set)) if args.set else {}
+    train_from_files(args.data, args.valid, args.config, args.out, resume=args.resume,
+                     overrides=overrides, max_train=args.max_train)
+    return 0
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from fignet_gym.evaluation import evaluate
+
+    evaluate(args.checkpoint, args.data, args.out, num=args.num, horizon=args.horizon,
+             videos=args.videos)
+    return 0
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from fignet_gym.bench import run
+
+    run(args)
+    return 0
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from fignet_gym.demo import run_demo
+
+    run_demo(args.out, quick=args.quick)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full ``fignet-gym`` argument parser."""
+    from fignet_gym.bench import add_arguments as bench_args
+    from fignet_gym.data.cli import register as register_data
+
+    p = argparse.ArgumentParser(prog="fignet-gym", description=__doc__)
+    sub = p.add_subparsers(dest="command", required=True)
+
+    d = sub.add_parser("demo", help="learned vs MuJoCo on the shipped pretrained simulators")
+    d.add_argument("--out", default="outputs/demo", help="folder for videos, plots and JSON")
+    d.add_argument("--quick", action="store_true", help="fewer rollouts (for tests)")
+    d.set_defaults(func=_demo)
+
+    b = sub.add_parser("bench", help="learned step vs MuJoCo timings")
+    bench_args(b)
+    b.set_defaults(func=_bench)
+
+    t = sub.add_parser("train", help="train a simulator on trajectory files")
+    t.add_argument("--data", required=True, help="training trajectories (HDF5)")
+    t.add_argument("--valid", help="validation trajectories (default: last 4 of --data)")
+    t.add_argument("--config", help="preset name (push-cpu, toss-cpu, paper) or JSON file")
+    t.add_argument("--set", help='JSON overrides, e.g. \'{"training.steps": 500}\'')
+    t.add_argument("--out", required=True, help="run folder (checkpoints, logs)")
+    t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
+    t.add_argument("--max-train", type=int, help="use only the first N training trajectories")
+    t.set_defaults(func=_train)
+
+    e = sub.add_parser("evaluate", help="rollout metrics, plots and videos of a checkpoint")
+    e.add_argument("--checkpoint", required=True, help="checkpoint file or pretrained name")
+    e.add_argument("--data", required=True, help="held-out trajectories (HDF5)")
+    e.add_argument("--out", default="outputs/eval", help="folder for metrics.json, plots, videos")
+    e.add_argument("--num", type=int, default=32, help="trajectories to evaluate")
+    e.add_argument("--horizon", type=int, default=50, help="step at which errors are reported")
+    e.add_argument("--videos", type=int, default=2, help="side-by-side videos to write")
+    e.set_defaults(func=_evaluate)
+
+    register_data(sub)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``fignet-gym`` script."""
+    args = build_parser().parse_args(argv)
+    return int(args.func(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,218 @@
+"""Rollout evaluation with the paper's metrics (``fignet-gym evaluate``).
+
+Metrics, over dynamic objects, for rollouts started from the first ``H`` true poses of each
+trajectory with kinematic and static objects following their true poses:
+
+* translation error: RMSE (m) of centre-of-mass positions over objects, at each step;
+* rotation error: geodesic angle (degrees) between predicted and true orientations,
+  ``2 acos(|<q_pred, q_true>|)``, averaged over objects, at each step;
+* penetration: mean depth (m) of dynamic nodes below the floor plane ``z = 0`` per step, as a ratio
+  of the prediction's to the ground truth's (MuJoCo's soft contacts penetrate a little too);
+* face-face edges per step and milliseconds per learned step.
+
+Two reference models give the errors a scale: *no motion* (every object keeps its initial pose; the
+unit of the paper's Fig. 7c) and *constant velocity* (each object keeps its last observed velocity).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from fignet_gym.data.format import Trajectory, build_scene
+from fignet_gym.geometry import (
+    axis_angle_to_quat,
+    quat_angle,
+    quat_conj,
+    quat_mul,
+    quat_normalize,
+    quat_to_axis_angle,
+)
+from fignet_gym.scene import Scene
+from fignet_gym.simulator import LearnedSimulator
+
+
+def _stack(trajs: list[Trajectory], scenes: list[Scene], steps: int, H: int
+           ) -> tuple[Scene, Tensor]:
+    """Batch scene and true poses ``float[H + steps, O_total, 7]`` of equal-length prefixes."""
+    poses = torch.cat([torch.as_tensor(t.poses[:H + steps], dtype=torch.float32) for t in trajs], 1)
+    return Scene.batch(scenes), poses
+
+
+@torch.no_grad()
+def batched_rollout(sim: LearnedSimulator, scene: Scene, true: Tensor
+                    ) -> tuple[Tensor, list[int], float]:
+    """Roll out from the first ``H`` rows of ``true float[H + T, O, 7]``.
+
+    Returns ``(pred float[T, O, 7], face edges per step, seconds per step)``.
+    """
+    H = sim.config.history + 1
+    dev = sim.device
+    scene = scene.to(dev)
+    hist = true[:H].to(dev)
+    preds, edges = [], []
+    t0 = time.perf_counter()
+    for t in range(H, true.shape[0]):
+        nxt, inputs, _ = sim.step_with_info(scene, hist, true[t].to(dev))
+        preds.append(nxt)
+        edges.append(int(inputs.graph.face_edges.senders.shape[0]))
+        hist = torch.cat((hist[1:], nxt[None]), 0)
+    secs = (time.perf_counter() - t0) / max(len(preds), 1)
+    return torch.stack(preds).cpu(), edges, secs
+
+
+def constant_velocity(true: Tensor, H: int) -> Tensor:
+    """Baseline: each object keeps the velocity of its last two observed poses. ``-> float[T, O, 7]``."""
+    p0, p1 = true[H - 2], true[H - 1]
+    steps = true.shape[0] - H
+    k = torch.arange(1, steps + 1, dtype=true.dtype)[:, None, None]
+    pos = p1[None, :, :3] + k * (p1[:, :3] - p0[:, :3])[None]
+    dq = quat_to_axis_angle(quat_mul(p1[:, 3:], quat_conj(p0[:, 3:])))
+    quat = quat_normalize(quat_mul(axis_angle_to_quat(k * dq[None]), p1[None, :, 3:].expand(steps, -1, -1)))
+    return torch.cat((pos, quat), -1)
+
+
+def errors(scene: Scene, pred: Tensor, true: Tensor) -> tuple[Tensor, Tensor]:
+    """Per-step translation RMSE (m) and mean rotation error (deg) over dynamic objects.
+
+    ``pred, true float[T, O, 7]`` for one scene (or a batch, then per scene ``float[T, B]``).
+    """
+    dyn = scene.dynamic_mask
+    com_p, com_t = scene.com_positions(pred), scene.com_positions(true)
+    sq = ((com_p - com_t) ** 2).sum(-1)[:, dyn]  # [T, O_dyn]
+    ang = torch.rad2deg(quat_angle(pred[..., 3:], true[..., 3:]))[:, dyn]
+    sid = scene.object_scene[dyn]
+    B = scene.num_scenes
+    cnt = torch.zeros(B).index_add_(0, sid, torch.ones(sid.shape[0]))
+    trans = (torch.zeros(sq.shape[0], B).index_add_(1, sid, sq) / cnt).sqrt()
+    rot = torch.zeros(sq.shape[0], B).index_add_(1, sid, ang) / cnt
+    return trans, rot
+
+
+def floor_penetration(scene: Scene, poses: Tensor) -> Tensor:
+    """Mean depth (m) of dynamic nodes below ``z = 0`` per step: ``float[T, O, 7] -> float[T]``."""
+    z = scene.node_positions(poses)[..., 2][:, scene.dynamic_mask[scene.node_object]]
+    return (-z).clamp_min(0).mean(-1)
+
+
+def rollout_metrics(sim: LearnedSimulator, trajs: list[Trajectory], scenes: list[Scene] | None = None,
+                    horizon: int = 50) -> dict[str, Any]:
+    """Rollout all trajectories in one batch (cut to the shortest) and summarise.
+
+    ``*_final`` values are at step ``min(horizon, T)``; ``*_curve`` are per-step medians over
+    trajectories; ``*_ratio_*`` divide the model's median error by a reference model's.
+    """
+    H = sim.config.history + 1
+    scenes = scenes or [build_scene(t, sim.config.mesh_options) for t in trajs]
+    steps = min(t.num_steps for t in trajs) - H
+    if steps < 1:
+        raise ValueError(f"trajectories need more than {H} poses to evaluate")
+    scene, true = _stack(trajs, scenes, steps, H)
+    pred, edges, secs = batched_rollout(sim, scene, true)
+    gt = true[H:]
+    k = min(horizon, steps) - 1
+    still = true[H - 1][None].expand_as(gt)
+    out: dict[str, Any] = {"steps": steps, "horizon_step": k + 1, "seconds": (k + 1) * sim.config.dt,
+                           "trajectories": len(trajs), "ms_per_step_batched": 1000 * secs,
+                           "face_edges_per_step": float(np.mean(edges)) / len(trajs)}
+    for name, p in (("", pred), ("still_", still), ("constvel_", constant_velocity(true, H))):
+        tr, rot = errors(scene, p, gt)
+        out[f"{name}translation_rmse_final"] = float(tr[k].median())
+        out[f"{name}rotation_deg_final"] = float(rot[k].median())
+        if not name:
+            out["translation_rmse_curve"] = tr.median(1).values.tolist()
+            out["rotation_deg_curve"] = rot.median(1).values.tolist()
+    for ref in ("still", "constvel"):
+        for q in ("translation_rmse", "rotation_deg"):
+            denom = out[f"{ref}_{q}_final"]
+            out[f"{q}_ratio_{ref}"] = out[f"{q}_final"] / denom if denom > 0 else math.nan
+    pen_p, pen_t = floor_penetration(scene, pred).mean(), floor_penetration(scene, gt).mean()
+    out["penetration_ratio"] = float(pen_p / pen_t) if pen_t > 0 else math.nan
+    out["penetration_m"] = float(pen_p)
+    return out
+
+
+def evaluate(checkpoint: str, data: str, out: str, num: int = 32, horizon: int = 50,
+             videos: int = 2) -> dict[str, Any]:
+    """Evaluate a checkpoint on a trajectory file: print a table, write JSON, plots and videos."""
+    from fignet_gym.data.format import load_trajectories
+
+    sim = LearnedSimulator.load(checkpoint)
+    trajs = load_trajectories(data)[:num]
+    outdir = Path(out)
+    outdir.mkdir(parents=True, exist_ok=True)
+    res = rollout_metrics(sim, trajs, horizon=horizon)
+    res.update(checkpoint=str(checkpoint), data=str(data))
+    (outdir / "metrics.json").write_text(json.dumps(res, indent=2))
+    print_table(res)
+    plot_curves(res, outdir / "errors.png")
+    for i in range(min(videos, len(trajs))):
+        write_comparison_video(sim, trajs[i], outdir / f"rollout_{i}.mp4")
+    print(f"wrote {outdir}/metrics.json, errors.png and {min(videos, len(trajs))} videos")
+    return res
+
+
+def print_table(res: dict[str, Any]) -> None:
+    """Print the headline metrics against the reference models."""
+    h = res["horizon_step"]
+    print(f"{res['trajectories']} trajectories, error at step {h} ({res['seconds']:.2f} s)")
+    print(f"{'model':16s} {'transl. RMSE (m)':>17s} {'rotation (deg)':>15s}")
+    for label, pre in (("FIGNet", ""), ("no motion", "still_"), ("const. velocity", "constvel_")):
+        print(f"{label:16s} {res[pre + 'translation_rmse_final']:17.4f} {res[pre + 'rotation_deg_final']:15.2f}")
+    print(f"ratio to no motion: translation {res['translation_rmse_ratio_still']:.1%}, "
+          f"rotation {res['rotation_deg_ratio_still']:.1%}")
+    print(f"face-face edges per scene-step {res['face_edges_per_step']:.1f}, "
+          f"{res['ms_per_step_batched']:.1f} ms per batched step, "
+          f"floor penetration ratio {res['penetration_ratio']:.2f}")
+
+
+def plot_curves(res: dict[str, Any], path: Path) -> None:
+    """Translation and rotation error against step (median over trajectories)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 2, figsize=(9, 3.2))
+    t = np.arange(1, len(res["translation_rmse_curve"]) + 1)
+    ax[0].plot(t, res["translation_rmse_curve"])
+    ax[0].set(xlabel="step", ylabel="translation RMSE (m)")
+    ax[1].plot(t, res["rotation_deg_curve"])
+    ax[1].set(xlabel="step", ylabel="rotation error (deg)")
+    for a in ax:
+        a.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def write_comparison_video(sim: LearnedSimulator, traj: Trajectory, path: Path) -> None:
+    """Side-by-side video at real time: ground truth (left) and the learned rollout (right)."""
+    from fignet_gym.data.viewer import Camera, fit_camera, render_frames, side_by_side, trajectory_model
+    from fignet_gym.data.viewer import write_video
+
+    H = sim.config.history + 1
+    scene = build_scene(traj, sim.config.mesh_options)
+    true = torch.as_tensor(traj.poses, dtype=torch.float32)
+    pred, _, _ = batched_rollout(sim, scene, true)
+    pred_full = torch.cat((true[:H], pred)).double().numpy()
+    model, bodies = trajectory_model(traj)
+    # One camera for both halves, framed on the ground truth, so the two are comparable.
+    cam = fit_camera(model, bodies, traj.poses)
+    fixed = Camera(lookat=tuple(cam.lookat), distance=float(cam.distance))
+    left = render_frames(model, traj.poses, bodies, 360, 360, fixed)
+    right = render_frames(model, pred_full, bodies, 360, 360, fixed)
+    write_video(side_by_side(left, right), path, fps=1.0 / traj.dt)
+
+
+def rollout_errors_tensor(pred: Tensor, true: Tensor, scene: Scene) -> Tensor:
+    """Convenience: ``float[T, 2]`` (translation m, rotation deg) for one scene."""
+    tr, rot = errors(scene, pred, true)
+    return torch.stack((tr[:, 0], rot[:, 0]), -1)

@@ -1,0 +1,369 @@
+"""Training loop: one-step supervision, random-walk noise, rotation augmentation, resumable.
+
+``fignet-gym train --data train.h5 --valid valid.h5 --config push-cpu --out runs/push``
+
+A run directory holds ``config.json``, ``last.pt`` (model + optimiser + sampler state, written
+atomically every ``checkpoint_every`` steps and on interruption), ``best.pt`` (lowest validation
+rollout error), ``curve.jsonl`` (one JSON line per validation: step, wall-clock CPU hours, graphs
+seen, errors) and TensorBoard logs. ``--resume`` continues exactly where a killed run stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import time
+from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from fignet_gym.data.format import Trajectory, load_trajectories
+from fignet_gym.geometry import quat_mul
+from fignet_gym.scene import Scene
+from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Optimisation and sampling settings (the model's own settings are in ``SimulatorConfig``).
+
+    Attributes:
+        steps: optimiser steps.
+        batch_size: graphs (training windows) per step, joined into one disjoint graph.
+        lr, lr_final: exponential decay from ``lr`` to ``lr_final`` over ``steps``.
+        noise_fraction: training noise std as a fraction of the median per-step acceleration of
+            moving dynamic nodes in the training data (used when the model's ``noise_std`` is 0).
+        still_weight: sampling weight of windows in which no dynamic object moves (moving: 1).
+        rigid_loss_weight: weight of the per-object linear and angular acceleration loss terms.
+        rotate_z: random rotation of each window about the vertical axis.
+        valid_every: steps between validation rollouts; valid_trajectories: how many.
+        checkpoint_every: steps between checkpoints of ``last.pt``.
+        threads: torch threads (0: leave torch's default).
+        seed: random seed of sampling, noise and initialisation.
+    """
+
+    steps: int = 20_000
+    batch_size: int = 8
+    lr: float = 1e-3
+    lr_final: float = 1e-4
+    noise_fraction: float = 0.5
+    still_weight: float = 0.1
+    rigid_loss_weight: float = 1.0
+    rotate_z: bool = True
+    valid_every: int = 1000
+    valid_trajectories: int = 8
+    checkpoint_every: int = 250
+    threads: int = 0
+    seed: int = 0
+
+    @staticmethod
+    def from_dict(d: dict[str, Any]) -> TrainConfig:
+        """Build from a dict; unknown keys are an error."""
+        unknown = set(d) - {f.name for f in fields(TrainConfig)}
+        if unknown:
+            raise ValueError(f"unknown training config keys {sorted(unknown)}")
+        return TrainConfig(**d)
+
+
+PRESETS: dict[str, dict[str, dict[str, Any]]] = {
+    # Latent 64, 5 message-passing steps, no mesh-mesh edges (FIGNet*): ~4x cheaper per graph than
+    # the paper's size on these CPUs, which buys more graphs per CPU hour.
+    "push-cpu": {"simulator": dict(latent_size=64, message_passing_steps=5, mesh_edges=False,
+                                   collision_radius=0.01, vertical_weight=0.1, scene_type="push"),
+                 "training": dict(batch_size=8)},
+    "toss-cpu": {"simulator": dict(latent_size=64, message_passing_steps=5, mesh_edges=False,
+                                   collision_radius=0.1, scene_type="toss"),
+                 "training": dict(batch_size=4)},
+    "paper": {"simulator": dict(latent_size=128, message_passing_steps=10, mesh_edges=True),
+              "training": dict(batch_size=8)},
+}
+
+
+def load_run_config(spec: str | None, overrides: dict[str, Any] | None = None
+                    ) -> tuple[dict[str, Any], TrainConfig]:
+    """Config from a preset name or a JSON file ``{"simulator": {...}, "training": {...}}``."""
+    if spec is None:
+        raw: dict[str, Any] = {"simulator": {}, "training": {}}
+    elif spec in PRESETS:
+        raw = json.loads(json.dumps(PRESETS[spec]))
+    else:
+        path = Path(spec)
+        if not path.is_file():
+            raise ValueError(f"config {spec!r} is neither a preset ({', '.join(PRESETS)}) nor a file")
+        raw = json.loads(path.read_text())
+    for key, val in (overrides or {}).items():
+        section, name = key.split(".", 1)
+        raw.setdefault(section, {})[name] = val
+    return raw.get("simulator", {}), TrainConfig.from_dict(raw.get("training", {}))
+
+
+# ----------------------------------------------------------------------------- data statistics
+def node_accelerations(traj: Trajectory, scene: Scene) -> Tensor:
+    """Per-step finite-difference accelerations of dynamic nodes, ``float[T-2, N_dyn, 3]``."""
+    poses = torch.as_tensor(traj.poses, dtype=torch.float32)
+    x = scene.node_positions(poses)[:, scene.dynamic_mask[scene.node_object]]
+    return x[2:] - 2 * x[1:-1] + x[:-2]
+
+
+def auto_noise_std(trajs: list[Trajectory], scenes: list[Scene], fraction: float) -> float:
+    """``fraction`` x the median acceleration norm (m/step^2) of moving dynamic nodes."""
+    norms = []
+    for traj, scene in zip(trajs, scenes):
+        a = node_accelerations(traj, scene).norm(dim=-1).flatten()
+        norms.append(a[a > 1e-7])
+    allnorms = torch.cat(norms)
+    if allnorms.numel() == 0:
+        raise ValueError("training data has no motion: cannot choose a noise scale")
+    return float(fraction * allnorms.median())
+
+
+class WindowSampler:
+    """Draws training windows ``float[H + 1, O, 7]`` weighted towards motion, reproducibly.
+
+    Windows in which some dynamic object moves get weight 1; still windows ``still_weight``.
+    """
+
+    def __init__(self, trajs: list[Trajectory], scenes: list[Scene], history: int,
+                 still_weight: float, seed: int) -> None:
+        self.trajs, self.scenes, self.span = trajs, scenes, history + 2
+        index, weight = [], []
+        for i, (traj, scene) in enumerate(zip(trajs, scenes)):
+            poses = traj.poses
+            dyn = scene.dynamic_mask.numpy()
+            moved = np.abs(np.diff(poses[:, dyn, :3], axis=0)).max(axis=(1, 2)) > 1e-6
+            for t in range(poses.shape[0] - self.span + 1):
+                index.append((i, t))
+                weight.append(1.0 if moved[t:t + self.span - 1].any() else still_weight)
+        if not index:
+            raise ValueError(f"no trajectory has the {self.span} poses a training window needs")
+        self.index = np.asarray(index)
+        w = np.asarray(weight)
+        self.prob = w / w.sum()
+        self.rng = np.random.default_rng(seed)
+
+    def sample(self, count: int) -> list[tuple[int, int]]:
+        """``count`` (trajectory, start) pairs."""
+        picks = self.rng.choice(len(self.index), size=count, p=self.prob)
+        return [tuple(map(int, self.index[p])) for p in picks]
+
+
+def rotate_about_z(poses: Tensor, angle: float) -> Tensor:
+    """Rotate whole-scene poses ``float[..., O, 7]`` about the world z axis through the origin."""
+    c, s = math.cos(angle), math.sin(angle)
+    rot = poses.new_tensor([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    qz = poses.new_tensor([math.cos(angle / 2), 0, 0, math.sin(angle / 2)])
+    return torch.cat((poses[..., :3] @ rot.T, quat_mul(qz.expand_as(poses[..., 3:]), poses[..., 3:])), -1)
+
+
+def rigid_terms(scene: Scene, pos: Tensor, acc: Tensor) -> tuple[Tensor, Tensor]:
+    """Per-object linear and rotational parts of node accelerations ``float[N, 3]`` at node
+    positions ``pos float[N, 3]``.
+
+    The rotational part is ``r_rms * sum_i r_i x a_i / sum_i |r_i|^2`` (``r`` from the object's
+    node centroid): an angular acceleration expressed as the tangential acceleration at the
+    object's RMS radius, so it has the units (and scale) of node accelerations. Both terms are
+    linear in ``acc``, so cheap and differentiable; a loss on them isolates the rotation that a
+    plain per-node MSE lets translation and noise drown (the yaw of a pushed object).
+    Returns ``(float[O, 3], float[O, 3])``.
+    """
+    o = scene.num_objects
+    seg = scene.node_object
+    count = acc.new_zeros(o).index_add_(0, seg, torch.ones_like(acc[:, 0])).clamp_min(1)
+    centroid = acc.new_zeros(o, 3).index_add_(0, seg, pos) / count[:, None]
+    r = pos - centroid[seg]
+    lin = acc.new_zeros(o, 3).index_add_(0, seg, acc) / count[:, None]
+    r2 = acc.new_zeros(o).index_add_(0, seg, (r * r).sum(-1)).clamp_min(1e-12)
+    torque = acc.new_zeros(o, 3).index_add_(0, seg, torch.cross(r, acc, dim=-1))
+    return lin, torque / r2[:, None] * (r2 / count).sqrt()[:, None]
+
+
+# ----------------------------------------------------------------------------- trainer
+@dataclass
+class TrainState:
+    """Everything ``--resume`` needs besides model and optimiser weights."""
+
+    step: int = 0
+    graphs_seen: int = 0
+    cpu_seconds: float = 0.0
+    best_error: float = float("inf")
+    history: list[dict[str, float]] = field(default_factory=list)
+
+
+class Trainer:
+    """Trains a :class:`LearnedSimulator` on trajectory files; see the module docstring."""
+
+    def __init__(self, sim_cfg: dict[str, Any], cfg: TrainConfig, train: list[Trajectory],
+                 valid: list[Trajectory], out: Path, resume: bool = False) -> None:
+        self.cfg, self.out = cfg, out
+        out.mkdir(parents=True, exist_ok=True)
+        if cfg.threads:
+            torch.set_num_threads(cfg.threads)
+        torch.manual_seed(cfg.seed)
+        dts = {round(t.dt, 9) for t in train + valid}
+        if len(dts) != 1:
+            raise ValueError(f"training and validation data mix step lengths {sorted(dts)}")
+        self.train, self.valid = train, valid
+        last = out / "last.pt"
+        if resume and last.is_file():
+            blob = torch.load(last, map_location="cpu", weights_only=True)
+            config = SimulatorConfig.from_dict(blob["config"])
+        else:
+            if resume:
+                print(f"--resume: no {last}, starting a new run")
+            config = SimulatorConfig.from_dict({**sim_cfg, "dt": dts.pop()})
+            blob = None
+        mesh_opts = config.mesh_options
+        from fignet_gym.data.format import build_scene
+
+        self.train_scenes = [build_scene(t, mesh_opts) for t in train]
+        self.valid_scenes = [build_scene(t, mesh_opts) for t in valid]
+        if config.noise_std <= 0 and cfg.noise_fraction > 0:
+            config = replace(config, noise_std=auto_noise_std(train, self.train_scenes, cfg.noise_fraction))
+        self.sim = LearnedSimulator(config)
+        self.opt = torch.optim.Adam(self.sim.parameters(), lr=cfg.lr)
+        gamma = (cfg.lr_final / cfg.lr) ** (1.0 / max(cfg.steps, 1))
+        self.sched = torch.optim.lr_scheduler.ExponentialLR(self.opt, gamma)
+        self.state = TrainState()
+        self.sampler = WindowSampler(train, self.train_scenes, config.history, cfg.still_weight, cfg.seed)
+        self.gen = torch.Generator().manual_seed(cfg.seed)
+        if blob is not None:
+            self.sim.load_state_dict(blob["state_dict"])
+            self.opt.load_state_dict(blob["meta"]["optimizer"])
+            self.sched.load_state_dict(blob["meta"]["scheduler"])
+            self.state = TrainState(**blob["meta"]["train_state"])
+            self.sampler.rng.bit_generator.state = json.loads(blob["meta"]["sampler_rng"])
+            self.gen.set_state(blob["meta"]["noise_rng"])
+            print(f"resumed from {last} at step {self.state.step}")
+        (out / "config.json").write_text(json.dumps(
+            {"simulator": config.to_dict(), "training": asdict(cfg)}, indent=2))
+
+    # -------------------------------------------------------------- one step
+    def batch(self) -> tuple[Scene, Tensor]:
+        """A disjoint batch of training windows: ``(scene, poses float[H + 1, O_total, 7])``."""
+        picks = self.sampler.sample(self.cfg.batch_size)
+        scenes, poses = [], []
+        for i, t in picks:
+            p = torch.as_tensor(self.train[i].poses[t:t + self.sampler.span], dtype=torch.float32)
+            if self.cfg.rotate_z:
+                p = rotate_about_z(p, float(torch.rand((), generator=self.gen)) * 2 * math.pi)
+            scenes.append(self.train_scenes[i])
+            poses.append(p)
+        return Scene.batch(scenes), torch.cat(poses, dim=1)
+
+    def loss(self, scene: Scene, poses: Tensor) -> Tensor:
+        """Node acceleration loss plus the per-object rigid terms, normalised by target scale."""
+        sim = self.sim
+        graph, target, weight = sim.training_example(scene, poses, self.gen)
+        base, pred_n = sim.loss(graph, target, weight)
+        if self.cfg.rigid_loss_weight <= 0:
+            return base
+        norm = sim.target_norm
+        # One isotropic scale (not per axis) keeps cross products meaningful.
+        scale = norm.std.mean().to(pred_n.dtype)
+        pred = norm.inverse(pred_n) / scale
+        pos = scene.node_positions(poses[-2])
+        lin_p, ang_p = rigid_terms(scene, pos, pred)
+        lin_t, ang_t = rigid_terms(scene, pos, target / scale)
+        dyn = scene.dynamic_mask
+        rigid = (lin_p - lin_t)[dyn].pow(2).mean() + (ang_p - ang_t)[dyn].pow(2).mean()
+        return base + self.cfg.rigid_loss_weight * rigid
+
+    # -------------------------------------------------------------- loop
+    def run(self) -> TrainState:
+        """Train until ``cfg.steps``; checkpoints on interruption (SIGINT / SIGTERM)."""
+        from torch.utils.tensorboard import SummaryWriter
+        from tqdm import tqdm
+
+        writer = SummaryWriter(str(self.out / "tb"))
+        stop = {"flag": False}
+
+        def _stop(signum: int, _frame: object) -> None:
+            stop["flag"] = True
+
+        old = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
+        st = self.state
+        bar = tqdm(total=self.cfg.steps, initial=st.step, desc="train", unit="step", dynamic_ncols=True)
+        t_last, c_last = time.perf_counter(), time.process_time()
+        try:
+            while st.step < self.cfg.steps and not stop["flag"]:
+                self.sim.train()
+                scene, poses = self.batch()
+                loss = self.loss(scene, poses)
+                self.opt.zero_grad(set_to_none=True)
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(self.sim.parameters(), 1.0)
+                self.opt.step()
+                self.sched.step()
+                st.step += 1
+                st.graphs_seen += self.cfg.batch_size
+                now, cnow = time.perf_counter(), time.process_time()
+                st.cpu_seconds += cnow - c_last
+                gps = self.cfg.batch_size / max(now - t_last, 1e-9)
+                t_last, c_last = now, cnow
+                bar.update(1)
+                if st.step % 20 == 0:
+                    bar.set_postfix(loss=f"{loss.item():.3g}", gps=f"{gps:.1f}")
+                    writer.add_scalar("train/loss", loss.item(), st.step)
+                    writer.add_scalar("train/lr", self.sched.get_last_lr()[0], st.step)
+                    writer.add_scalar("train/graphs_per_s", gps, st.step)
+                if st.step % self.cfg.valid_every == 0 or st.step == self.cfg.steps:
+                    self.validate(writer)
+                if st.step % self.cfg.checkpoint_every == 0:
+                    self.checkpoint()
+        finally:
+            self.checkpoint()
+            bar.close()
+            writer.close()
+            for s, h in old.items():
+                signal.signal(s, h)
+        return st
+
+    def validate(self, writer: Any | None = None) -> dict[str, float]:
+        """Rollout errors on the first validation trajectories; keeps ``best.pt``."""
+        from fignet_gym.evaluation import rollout_metrics
+
+        self.sim.eval()
+        n = min(self.cfg.valid_trajectories, len(self.valid))
+        m = rollout_metrics(self.sim, self.valid[:n], self.valid_scenes[:n])
+        st = self.state
+        rec = {"step": st.step, "graphs_seen": st.graphs_seen, "cpu_hours": st.cpu_seconds / 3600,
+               **{k: float(v) for k, v in m.items() if isinstance(v, (int, float))}}
+        st.history.append(rec)
+        with open(self.out / "curve.jsonl", "a") as fh:
+            fh.write(json.dumps(rec) + "\n")
+        if writer is not None:
+            for k, v in rec.items():
+                if k != "step":
+                    writer.add_scalar(f"valid/{k}", v, st.step)
+        key = rec.get("translation_rmse_final", float("inf"))
+        if key < st.best_error:
+            st.best_error = key
+            self.sim.save(self.out / "best.pt", meta={"valid": rec})
+        print(f"\nstep {st.step}: " + ", ".join(f"{k}={v:.4g}" for k, v in rec.items() if k != "step"))
+        return rec
+
+    def checkpoint(self) -> None:
+        """Atomically write ``last.pt`` with everything needed to resume."""
+        meta = {"optimizer": self.opt.state_dict(), "scheduler": self.sched.state_dict(),
+                "train_state": asdict(self.state),
+                "sampler_rng": json.dumps(self.sampler.rng.bit_generator.state),
+                "noise_rng": self.gen.get_state()}
+        self.sim.save(self.out / "last.pt", meta=meta)
+
+
+def train_from_files(data: str, valid: str | None, config: str | None, out: str,
+                     resume: bool = False, overrides: dict[str, Any] | None = None,
+                     max_train: int | None = None) -> TrainState:
+    """Load data, build a :class:`Trainer` and run it."""
+    train_trajs = load_trajectories(data)
+    if max_train:
+        train_trajs = train_trajs[:max_train]
+    valid_trajs = load_trajectories(valid) if valid else train_trajs[-4:]
+    sim_cfg, cfg = load_run_config(config, overrides)
+    trainer = Trainer(sim_cfg, cfg, train_trajs, valid_trajs, Path(out), resume=resume)
+    return trainer.run()
