@@ -144,7 +144,9 @@ def evaluate(checkpoint: str, data: str, out: str, num: int = 32, horizon: int =
     """Evaluate a checkpoint on a trajectory file: print a table, write JSON, plots and videos."""
     from fignet_gym.data.format import load_trajectories
 
-    sim = LearnedSimulator.load(checkpoint)
+    from fignet_gym.pretrained_models import resolve_checkpoint
+
+    sim = LearnedSimulator.load(resolve_checkpoint(checkpoint))
     trajs = load_trajectories(data)[:num]
     outdir = Path(out)
     outdir.mkdir(parents=True, exist_ok=True)

@@ -79,9 +79,9 @@ def test_push_object_body_frame_is_dataset_frame_and_rests_on_floor() -> None:
 
 def test_push_contact_friction_uses_floor_and_tip_values() -> None:
     model = mujoco.MjModel.from_xml_string(
-        push_scene_xml("rect1", friction=0.2, tip_friction=0.6, tip_xy=(-0.048, 0.0)))
+        push_scene_xml("rect1", friction=0.2, tip_friction=0.6, tip_xy=(-0.0497, 0.0)))
     data = mujoco.MjData(model)
-    mujoco.mj_step(model, data, nstep=5)
+    mujoco.mj_forward(model, data)  # contacts of the initial state
     floor, tip = model.geom("floor").id, model.geom("tip").id
     frictions = {(min(c.geom1, c.geom2)): c.friction[0] for c in data.contact[:data.ncon]}
     assert frictions[floor] == pytest.approx(0.2)

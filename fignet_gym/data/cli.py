@@ -1,0 +1,165 @@
+"""Data subcommands of ``fignet-gym``: ``generate``, ``show``, ``import-mit``, ``import-movi``.
+
+:func:`register` adds them to the main parser's subparsers; each sets ``func`` to a callable that
+takes the parsed arguments and returns an exit code. Known bad input (malformed files, unknown
+shapes) prints one ``error:`` line naming the file, trajectory and field, never a traceback.
+Also runnable alone: ``python -m fignet_gym.data.cli <subcommand> ...``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from fignet_gym.data.format import TrajectoryFormatError
+
+_KNOWN_ERRORS: tuple[type[BaseException], ...] = (TrajectoryFormatError, FileNotFoundError,
+                                                  ValueError, IndexError)
+
+
+def _guarded(fn: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
+    def run(args: argparse.Namespace) -> int:
+        try:
+            return fn(args)
+        except _KNOWN_ERRORS as err:  # DataImportError and GenerationError are among these
+            print(f"error: {err}", file=sys.stderr)
+            return 1
+    run.__doc__ = fn.__doc__
+    return run
+
+
+def _generate(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from fignet_gym.data.generate import TossConfig, default_config, generate
+    from fignet_gym.scene import MeshOptions
+
+    cfg = default_config(args.kind)
+    if isinstance(cfg, TossConfig):
+        mo = MeshOptions(sphere_subdivisions=args.sphere_subdivisions,
+                         cylinder_sections=args.cylinder_sections,
+                         box_subdivisions=args.box_subdivisions)
+        cfg = replace(cfg, mesh_options=mo)
+    if args.duration is not None:
+        cfg = replace(cfg, duration=args.duration)
+    stats = generate(args.kind, args.num, args.seed, args.out, workers=args.workers, config=cfg,
+                     progress=not args.no_progress)
+    print(f"wrote {stats['num']} {args.kind} trajectories to {args.out} in "
+          f"{stats['seconds']:.1f} s ({stats['traj_per_s']:.2f} traj/s, {args.workers} workers)")
+    return 0
+
+
+def _show(args: argparse.Namespace) -> int:
+    from fignet_gym.data.format import TrajectoryFile
+    from fignet_gym.data.viewer import Camera, render_trajectory_record
+
+    with TrajectoryFile(args.file) as f:
+        traj = f[args.traj]
+    out = args.out or Path(args.file).with_name(f"{Path(args.file).stem}_traj{args.traj}.mp4")
+    cam = Camera(distance=args.distance, azimuth=args.azimuth, elevation=args.elevation)
+    path = render_trajectory_record(traj, out, fps=args.fps, camera=cam, width=args.width,
+                                    height=args.height)
+    print(f"rendered trajectory {args.traj} ({traj.name}, {traj.num_steps} poses) to {path}")
+    return 0
+
+
+def _import_mit(args: argparse.Namespace) -> int:
+    from fignet_gym.data.importers import MitSelection, import_mit
+
+    sel = MitSelection(
+        surfaces=None if "any" in args.surface else tuple(args.surface),
+        shapes=tuple(args.shape) if args.shape else None,
+        velocities=tuple(args.velocity) if args.velocity else None,
+        accelerations=None if args.any_acceleration else tuple(args.acceleration))
+    n = import_mit(args.paths, args.out, sel, dt=args.dt,
+                   max_duration=args.duration if args.duration > 0 else None,
+                   friction=args.friction, skip_bad=args.skip_bad)
+    print(f"imported {n} MIT pushes into {args.out}")
+    return 0
+
+
+def _import_movi(args: argparse.Namespace) -> int:
+    from fignet_gym.data.importers import import_movi, load_mesh_map
+
+    n = import_movi(args.paths, load_mesh_map(args.meshes), args.out, skip_bad=args.skip_bad,
+                    frame_rate=args.frame_rate, floor_half_size=args.floor_half_size)
+    print(f"imported {n} MOVi scenes into {args.out}")
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the data subcommands to ``subparsers`` (of the ``fignet-gym`` parser)."""
+    from fignet_gym.data.generate import KINDS
+
+    g = subparsers.add_parser("generate", help="generate MuJoCo training trajectories",
+                              description="Generate trajectories with MuJoCo into an HDF5 file.")
+    g.add_argument("kind", choices=KINDS)
+    g.add_argument("--num", type=int, required=True, help="number of trajectories")
+    g.add_argument("--seed", type=int, default=0, help="base seed (non-negative)")
+    g.add_argument("--out", required=True, help="output .h5 file (written atomically)")
+    g.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
+                   help="processes (results do not depend on it)")
+    g.add_argument("--duration", type=float, default=None,
+                   help="seconds per trajectory (default: 1.0 push, 2.0 toss)")
+    g.add_argument("--sphere-subdivisions", type=int, default=1,
+                   help="toss: icosphere level of spheres (1: 42 nodes)")
+    g.add_argument("--cylinder-sections", type=int, default=12, help="toss: cylinder facets")
+    g.add_argument("--box-subdivisions", type=int, default=0,
+                   help="toss: cube subdivisions (0: 8 corner nodes)")
+    g.add_argument("--no-progress", action="store_true", help="no progress bar")
+    g.set_defaults(func=_guarded(_generate))
+
+    s = subparsers.add_parser("show", help="render a stored trajectory to MP4 or GIF")
+    s.add_argument("file")
+    s.add_argument("--traj", type=int, default=0, help="trajectory index in the file")
+    s.add_argument("--out", default=None, help=".mp4 or .gif (default: <file>_traj<K>.mp4)")
+    s.add_argument("--fps", type=float, default=None, help="default: 1 / dt (real time)")
+    s.add_argument("--width", type=int, default=480)
+    s.add_argument("--height", type=int, default=480)
+    s.add_argument("--azimuth", type=float, default=90.0)
+    s.add_argument("--elevation", type=float, default=-45.0)
+    s.add_argument("--distance", type=float, default=None, help="default: fitted to the motion")
+    s.set_defaults(func=_guarded(_show))
+
+    m = subparsers.add_parser("import-mit", help="import MIT Pushing raw or pdproc files")
+    m.add_argument("paths", nargs="+", help="files or directories (searched recursively)")
+    m.add_argument("--out", required=True)
+    m.add_argument("--surface", nargs="+", default=["abs"], help="surfaces, or 'any'")
+    m.add_argument("--shape", nargs="+", default=None, help="shapes (default: all)")
+    m.add_argument("--velocity", nargs="+", type=float, default=None, help="mm/s (default: all)")
+    m.add_argument("--acceleration", nargs="+", type=float, default=[0.0],
+                   help="the file name's 'a' (default: 0, constant speed)")
+    m.add_argument("--any-acceleration", action="store_true")
+    m.add_argument("--dt", type=float, default=0.02, help="resampling step (s)")
+    m.add_argument("--duration", type=float, default=0.5,
+                   help="cut each push after this many seconds (0: keep all)")
+    m.add_argument("--friction", type=float, default=0.25,
+                   help="friction written into the MJCF (the real one is unknown)")
+    m.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
+    m.set_defaults(func=_guarded(_import_mit))
+
+    v = subparsers.add_parser("import-movi", help="import Kubric MOVi metadata.json records")
+    v.add_argument("paths", nargs="+", help="metadata.json files or directories")
+    v.add_argument("--meshes", required=True,
+                   help="JSON object {shape_label or asset_id: mesh file}")
+    v.add_argument("--out", required=True)
+    v.add_argument("--frame-rate", type=float, default=None,
+                   help="default: the record's metadata.frame_rate, else 12")
+    v.add_argument("--floor-half-size", type=float, default=20.0)
+    v.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
+    v.set_defaults(func=_guarded(_import_movi))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Stand-alone entry point with only the data subcommands."""
+    parser = argparse.ArgumentParser(prog="fignet-gym")
+    register(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    return int(args.func(args))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
