@@ -44,6 +44,10 @@ class SimulatorConfig:
         object_nodes: use one virtual node per object.
         collision: ``"face"`` (FIGNet face-face hyper-edges) or ``"node"`` (MeshGraphNets node-node).
         collision_radius: ``d_c`` (m).
+        kinematic_receivers: keep face-face edges whose receiver face belongs to a static or
+            kinematic object. The paper keeps both directions; dropping these (default) halves the
+            edges with the floor and the pusher, whose motion is given anyway, for the same
+            messages into every dynamic node.
         noise_std: std (m) of the random-walk training noise at the last input frame.
         vertical_weight: loss weight of the z component of accelerations (1: the paper's plain MSE).
         scene_type: what the model was trained on ("push", "toss", ...; "" = unspecified).
@@ -59,6 +63,7 @@ class SimulatorConfig:
     object_nodes: bool = True
     collision: str = "face"
     collision_radius: float = 0.02
+    kinematic_receivers: bool = False
     noise_std: float = 0.0
     vertical_weight: float = 1.0
     scene_type: str = ""
@@ -131,6 +136,9 @@ class LearnedSimulator(nn.Module):
         if self.config.collision == "face":
             contacts = find_face_contacts(node_hist[-1], scene.faces, scene.face_object,
                                           scene.collision_pairs, self.config.collision_radius)
+            if not self.config.kinematic_receivers:
+                keep = scene.dynamic_mask[scene.face_object[contacts.receiver_face]]
+                contacts = FaceContacts(*(getattr(contacts, f.name)[keep] for f in fields(contacts)))
         else:
             node_edges = node_collision_edges(scene, node_hist[-1], self.config.collision_radius)
         graph = build_graph(scene, node_hist, com_hist, node_next, com_next, contacts, node_edges)
