@@ -45,6 +45,9 @@ class MeshOptions:
         capsule_rings: latitude rings per hemisphere of a capsule.
         box_subdivisions: loop subdivisions of a box (0: its 8 corners).
         plane_half_size: half extent (m) of a plane whose MuJoCo size is 0 (infinite).
+        plane_cells: cells per side of a plane's grid. FIGNet needs 1 (two triangles: face-face
+            edges catch any contact with them); node-based baselines (MeshGraphNets) only sense a
+            floor through its nodes, so they need a subdivided one.
     """
 
     sphere_subdivisions: int = 1
@@ -52,6 +55,7 @@ class MeshOptions:
     capsule_rings: int = 2
     box_subdivisions: int = 0
     plane_half_size: float = 20.0
+    plane_cells: int = 1
 
 
 def restitution_to_dampratio(restitution: float) -> float:
@@ -90,8 +94,14 @@ def _primitive_mesh(model: mujoco.MjModel, g: int, opts: MeshOptions) -> trimesh
     if gtype == G.mjGEOM_PLANE:
         hx = size[0] if size[0] > 0 else opts.plane_half_size
         hy = size[1] if size[1] > 0 else opts.plane_half_size
-        v = np.array([[-hx, -hy, 0], [hx, -hy, 0], [hx, hy, 0], [-hx, hy, 0]], float)
-        return trimesh.Trimesh(v, np.array([[0, 1, 2], [0, 2, 3]]), process=False)
+        k = max(int(opts.plane_cells), 1)
+        gx, gy = np.meshgrid(np.linspace(-hx, hx, k + 1), np.linspace(-hy, hy, k + 1), indexing="xy")
+        v = np.stack((gx.ravel(), gy.ravel(), np.zeros(gx.size)), axis=1)
+        i, j = np.meshgrid(np.arange(k), np.arange(k), indexing="xy")
+        a = (j * (k + 1) + i).ravel()  # lower-left corner of each cell
+        b, c, d = a + 1, a + k + 2, a + k + 1
+        faces = np.concatenate((np.stack((a, b, c), 1), np.stack((a, c, d), 1)))
+        return trimesh.Trimesh(v, faces, process=False)
     if gtype in (G.mjGEOM_SPHERE, G.mjGEOM_ELLIPSOID):
         m = trimesh.creation.icosphere(subdivisions=opts.sphere_subdivisions, radius=1.0)
         scale = size[:3] if gtype == G.mjGEOM_ELLIPSOID else np.full(3, size[0])
