@@ -18,3 +18,7 @@ __all__ = [
     "load_pretrained",
 ]
 __version__ = "0.1.0"
+
+# Registers fignet_gym/Push-v0 and fignet_gym/Toss-v0 with Gymnasium (whose 1.x releases do not load
+# the package's entry point by themselves).
+import fignet_gym.envs  # noqa: E402, F401

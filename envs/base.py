@@ -1,0 +1,223 @@
+"""Shared machinery of the fignet_gym environments: one MuJoCo model, one :class:`Dynamics`.
+
+An environment only ever talks to a :class:`~fignet_gym.dynamics.Dynamics` (``step`` /
+``step_many``): whether MuJoCo or a learned FIGNet model moves the objects is decided once, by the
+``dynamics=`` argument, and never branched on afterwards. One environment step is split in three
+so that the vector environment (:mod:`fignet_gym.envs.vector`) can run the physics of many
+environments in one batched call:
+
+1. :meth:`MjDynamicsEnv._pre_step` checks the action and writes it into ``MjData`` (mocap targets,
+   a released object's velocity);
+2. the dynamics advances ``MjData`` by :attr:`MjDynamicsEnv.nstep` MuJoCo timesteps;
+3. :meth:`MjDynamicsEnv._post_step` computes observation, reward and termination.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from fignet_gym.dynamics import DivergenceError, Dynamics, make_dynamics
+
+
+class MjDynamicsEnv(gym.Env[np.ndarray, np.ndarray]):
+    """Base class: a compiled ``MjModel``, its ``MjData`` and the :class:`Dynamics` that steps it.
+
+    Subclasses set :attr:`scene_type`, build the model and implement :meth:`_reset_task`,
+    :meth:`_apply_action`, :meth:`_observe` and :meth:`_evaluate`.
+
+    Attributes:
+        model: the compiled scene (shared, read-only).
+        data: this environment's state.
+        dynamics: what advances ``data``.
+        nstep: MuJoCo timesteps per environment step.
+        observation_layout: name -> slice of the observation vector (as the class docstring says).
+    """
+
+    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 50}
+    scene_type: str = ""
+    observation_layout: dict[str, slice] = {}
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        dynamics: str | Dynamics,
+        checkpoint: Any,
+        nstep: int,
+        render_mode: str | None,
+        width: int,
+        height: int,
+        dynamics_kwargs: dict[str, Any] | None,
+    ) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"{type(self).__name__}: render_mode must be one of "
+                f"{self.metadata['render_modes']} or None, got {render_mode!r}"
+            )
+        self.model = model
+        self.nstep = int(nstep)
+        self.dynamics = make_dynamics(
+            dynamics, checkpoint, self.scene_type, **(dynamics_kwargs or {})
+        )
+        self.dynamics.validate(model, self.nstep, self.scene_type)
+        self.render_mode = render_mode
+        self.width, self.height = int(width), int(height)
+        self.metadata = {
+            **self.metadata,
+            "render_fps": max(1, round(1.0 / (self.nstep * model.opt.timestep))),
+        }
+        self._init_state()
+
+    def _init_state(self) -> None:
+        """Per-instance state: ``MjData``, renderer, random generator (also for :meth:`_spawn`)."""
+        self.data = mujoco.MjData(self.model)
+        self._renderer: mujoco.Renderer | None = None
+        self._np_random = None
+        self._np_random_seed = None
+
+    def _spawn(self) -> MjDynamicsEnv:
+        """A new environment sharing this one's model, dynamics and configuration (fresh state)."""
+        new = copy.copy(self)
+        new._init_state()
+        return new
+
+    # ----------------------------------------------------------------- subclass hooks
+    def _reset_task(self, rng: np.random.Generator, options: dict[str, Any] | None) -> None:
+        """Sample a task, write the initial state into ``self.data`` (``mj_forward`` follows)."""
+        raise NotImplementedError
+
+    def _apply_action(self, action: np.ndarray) -> None:
+        """Write a checked, clipped action ``float[A]`` into ``self.data``."""
+        raise NotImplementedError
+
+    def _observe(self) -> np.ndarray:
+        """Observation ``float32[D]`` of the current state."""
+        raise NotImplementedError
+
+    def _evaluate(self, action: np.ndarray) -> tuple[dict[str, float], bool, bool, dict[str, Any]]:
+        """Reward terms (summed into the reward), terminated, truncated and extra info."""
+        raise NotImplementedError
+
+    # ----------------------------------------------------------------- gymnasium API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Seeded reset; returns the first observation and an (empty) info dictionary."""
+        super().reset(seed=seed)
+        mujoco.mj_resetData(self.model, self.data)
+        self._reset_task(self.np_random, options)
+        mujoco.mj_forward(self.model, self.data)
+        return self._observe(), {}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """One environment step (``nstep`` MuJoCo timesteps of ``dynamics``)."""
+        act = self._pre_step(action)
+        reason = None
+        try:
+            self.dynamics.step(self.model, self.data, self.nstep)
+        except DivergenceError as err:
+            reason = err.reason
+        return self._post_step(act, reason)
+
+    def _pre_step(self, action: Any) -> np.ndarray:
+        """Validate (``ValueError`` for a wrong shape or a NaN/inf), clip and apply the action."""
+        act = check_action(type(self).__name__, action, self.action_space)
+        self._apply_action(act)
+        return act
+
+    def _post_step(
+        self, action: np.ndarray, diverged: str | None
+    ) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """Observation, reward (sum of the ``reward_*`` info terms), terminated, truncated, info."""
+        terms, terminated, truncated, info = self._evaluate(action)
+        if diverged is not None:
+            truncated = True
+            info["diverged"] = diverged
+        reward = float(sum(terms.values()))
+        return self._observe(), reward, bool(terminated), bool(truncated), {**terms, **info}
+
+    def render(self) -> np.ndarray | None:
+        """``uint8[height, width, 3]`` frame of the current state (MuJoCo's renderer)."""
+        if self.render_mode is None:
+            gym.logger.warn(
+                f"{type(self).__name__}.render() called without render_mode='rgb_array'"
+            )
+            return None
+        if self._renderer is None:
+            self._renderer = mujoco.Renderer(self.model, self.height, self.width)
+        self._renderer.update_scene(self.data, camera=self._camera())
+        self._decorate(self._renderer.scene)
+        return self._renderer.render()
+
+    def _camera(self) -> int | str | mujoco.MjvCamera:
+        """Camera to render from (default: MuJoCo's free camera)."""
+        return -1
+
+    def _decorate(self, scene: mujoco.MjvScene) -> None:
+        """Add visual-only markers (goals, targets) to the scene before rendering."""
+
+    def close(self) -> None:
+        """Release the renderer (the dynamics and model are shared and stay usable)."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+def check_action(owner: str, action: Any, space: gym.spaces.Box) -> np.ndarray:
+    """``float64[A]`` action clipped to ``space``; ``ValueError`` naming ``owner`` if malformed."""
+    try:
+        act = np.asarray(action, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{owner}: action {action!r} is not numeric") from exc
+    if act.shape != space.shape:
+        raise ValueError(f"{owner}: action must have shape {space.shape}, got {act.shape}")
+    if not np.isfinite(act).all():
+        raise ValueError(f"{owner}: action {act.tolist()} contains NaN or infinite values")
+    return np.clip(act, space.low, space.high)
+
+
+def yaw_of(quat: np.ndarray) -> np.ndarray:
+    """Heading (rad) about +z of unit quaternions (w, x, y, z): ``float[..., 4] -> float[...]``."""
+    w, x, y, z = np.moveaxis(np.asarray(quat, dtype=np.float64), -1, 0)
+    return np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+def wrap_angle(a: np.ndarray | float) -> np.ndarray:
+    """Angle(s) wrapped to ``[-pi, pi)``."""
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
+def layout(*entries: tuple[str, int]) -> dict[str, slice]:
+    """Consecutive named slices of an observation vector from ``(name, size)`` pairs."""
+    out, start = {}, 0
+    for name, size in entries:
+        out[name] = slice(start, start + size)
+        start += size
+    return out
+
+
+def layout_size(lay: dict[str, slice]) -> int:
+    """Total length of a :func:`layout`."""
+    return max((s.stop for s in lay.values()), default=0)
+
+
+def add_disc(
+    scene: mujoco.MjvScene, pos: Sequence[float], radius: float, rgba: Sequence[float]
+) -> None:
+    """Draw a flat translucent disc (a visual-only geom) into a MuJoCo scene."""
+    if scene.ngeom >= scene.maxgeom:
+        return
+    mujoco.mjv_initGeom(
+        scene.geoms[scene.ngeom],
+        int(mujoco.mjtGeom.mjGEOM_CYLINDER),
+        np.array([radius, 0.001, 0.0]),
+        np.asarray(pos, dtype=np.float64),
+        np.eye(3).ravel(),
+        np.asarray(rgba, dtype=np.float32),
+    )
+    scene.ngeom += 1
