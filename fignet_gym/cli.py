@@ -25,6 +25,13 @@ def _evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _ship(args: argparse.Namespace) -> int:
+    from fignet_gym.ship import ship
+
+    ship(args.run, args.name, args.data, args.horizon, num=args.num, dest=args.dest, notes=args.notes)
+    return 0
+
+
 def _bench(args: argparse.Namespace) -> int:
     from fignet_gym.bench import run
 
@@ -74,6 +81,16 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--horizon", type=int, default=50, help="step at which errors are reported")
     e.add_argument("--videos", type=int, default=2, help="side-by-side videos to write")
     e.set_defaults(func=_evaluate)
+
+    s = sub.add_parser("ship", help="export a run's best checkpoint with a model card")
+    s.add_argument("--run", required=True, help="run folder (with best.pt, curve.jsonl)")
+    s.add_argument("--name", required=True, help="pretrained name, e.g. push")
+    s.add_argument("--data", required=True, help="held-out trajectories for the card's scores")
+    s.add_argument("--horizon", type=int, default=50, help="step at which errors are reported")
+    s.add_argument("--num", type=int, default=64, help="held-out trajectories to evaluate")
+    s.add_argument("--dest", help="folder (default: the package's pretrained/)")
+    s.add_argument("--notes", default="", help="extra Markdown for the card")
+    s.set_defaults(func=_ship)
 
     register_data(sub)
     return p

@@ -125,26 +125,35 @@ def auto_noise_std(trajs: list[Trajectory], scenes: list[Scene], fraction: float
 
 
 class WindowSampler:
-    """Draws training windows ``float[H + 1, O, 7]`` weighted towards motion, reproducibly.
+    """Draws training windows ``float[H + 1, O, 7]`` weighted towards contact events, reproducibly.
 
-    Windows in which some dynamic object moves get weight 1; still windows ``still_weight``.
+    A window's weight is ``still_weight`` if no dynamic object moves in it, else
+    ``1 + min(a / a_ref, accel_cap)``, where ``a`` is the window's largest dynamic-node
+    acceleration and ``a_ref`` the median over moving windows. Contact onsets (a pusher starting an
+    object, an impact) are a few windows per trajectory but carry most of what a model must learn.
     """
 
     def __init__(self, trajs: list[Trajectory], scenes: list[Scene], history: int,
-                 still_weight: float, seed: int) -> None:
+                 still_weight: float, seed: int, accel_cap: float = 10.0) -> None:
         self.trajs, self.scenes, self.span = trajs, scenes, history + 2
-        index, weight = [], []
+        index, weight, accel = [], [], []
         for i, (traj, scene) in enumerate(zip(trajs, scenes)):
             poses = traj.poses
             dyn = scene.dynamic_mask.numpy()
             moved = np.abs(np.diff(poses[:, dyn, :3], axis=0)).max(axis=(1, 2)) > 1e-6
+            acc = node_accelerations(traj, scene).norm(dim=-1).amax(dim=-1).numpy()  # [T-2]
             for t in range(poses.shape[0] - self.span + 1):
                 index.append((i, t))
-                weight.append(1.0 if moved[t:t + self.span - 1].any() else still_weight)
+                # The target acceleration of window t is at pose t + span - 2 (index into acc).
+                accel.append(float(acc[t + self.span - 3]))
+                weight.append(-1.0 if moved[t:t + self.span - 1].any() else still_weight)
         if not index:
             raise ValueError(f"no trajectory has the {self.span} poses a training window needs")
         self.index = np.asarray(index)
-        w = np.asarray(weight)
+        w, a = np.asarray(weight), np.asarray(accel)
+        moving = w < 0
+        a_ref = float(np.median(a[moving])) if moving.any() else 1.0
+        w[moving] = 1.0 + np.minimum(a[moving] / max(a_ref, 1e-12), accel_cap)
         self.prob = w / w.sum()
         self.rng = np.random.default_rng(seed)
 
