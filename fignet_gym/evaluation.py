@@ -143,7 +143,6 @@ def evaluate(checkpoint: str, data: str, out: str, num: int = 32, horizon: int =
              videos: int = 2) -> dict[str, Any]:
     """Evaluate a checkpoint on a trajectory file: print a table, write JSON, plots and videos."""
     from fignet_gym.data.format import load_trajectories
-
     from fignet_gym.pretrained_models import resolve_checkpoint
 
     sim = LearnedSimulator.load(resolve_checkpoint(checkpoint))
@@ -167,7 +166,8 @@ def print_table(res: dict[str, Any]) -> None:
     print(f"{res['trajectories']} trajectories, error at step {h} ({res['seconds']:.2f} s)")
     print(f"{'model':16s} {'transl. RMSE (m)':>17s} {'rotation (deg)':>15s}")
     for label, pre in (("FIGNet", ""), ("no motion", "still_"), ("const. velocity", "constvel_")):
-        print(f"{label:16s} {res[pre + 'translation_rmse_final']:17.4f} {res[pre + 'rotation_deg_final']:15.2f}")
+        tr, rot = res[pre + "translation_rmse_final"], res[pre + "rotation_deg_final"]
+        print(f"{label:16s} {tr:17.4f} {rot:15.2f}")
     print(f"ratio to no motion: translation {res['translation_rmse_ratio_still']:.1%}, "
           f"rotation {res['rotation_deg_ratio_still']:.1%}")
     print(f"face-face edges per scene-step {res['face_edges_per_step']:.1f}, "
@@ -197,8 +197,14 @@ def plot_curves(res: dict[str, Any], path: Path) -> None:
 
 def write_comparison_video(sim: LearnedSimulator, traj: Trajectory, path: Path) -> None:
     """Side-by-side video at real time: ground truth (left) and the learned rollout (right)."""
-    from fignet_gym.data.viewer import Camera, fit_camera, render_frames, side_by_side, trajectory_model
-    from fignet_gym.data.viewer import write_video
+    from fignet_gym.data.viewer import (
+        Camera,
+        fit_camera,
+        render_frames,
+        side_by_side,
+        trajectory_model,
+        write_video,
+    )
 
     H = sim.config.history + 1
     scene = build_scene(traj, sim.config.mesh_options)

@@ -9,9 +9,9 @@ one graph. Conventions (object kinds, restitution, poses) are in ``docs/architec
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from enum import IntEnum
-from typing import Sequence
 
 import mujoco
 import numpy as np
@@ -200,7 +200,7 @@ class Scene:
             raise ValueError("from_meshes: vertices, faces, kinds and props need one entry per object")
         names = tuple(names) if names is not None else tuple(f"object{i}" for i in range(n_obj))
         vs, fs, node_obj, face_obj, offset = [], [], [], [], 0
-        for i, (v, f) in enumerate(zip(vertices, faces)):
+        for i, (v, f) in enumerate(zip(vertices, faces, strict=True)):
             v = np.asarray(v, dtype=np.float64).reshape(-1, 3)
             f = np.asarray(f, dtype=np.int64).reshape(-1, 3)
             if len(f) == 0 or f.min() < 0 or f.max() >= len(v):
@@ -284,7 +284,7 @@ class Scene:
             parts = [_geom_in_body(model, g, opts) for g in per_body[b]]
             offs = np.cumsum([0] + [len(p[0]) for p in parts[:-1]])
             verts.append(np.concatenate([p[0] for p in parts]))
-            faces.append(np.concatenate([p[1] + o for p, o in zip(parts, offs)]))
+            faces.append(np.concatenate([p[1] + o for p, o in zip(parts, offs, strict=True)]))
             g0 = per_body[b][0]
             mass = 0.0 if kind == ObjectKind.STATIC else float(model.body_mass[b])
             props.append([mass, float(model.geom_friction[g0, 0]),
@@ -321,13 +321,13 @@ class Scene:
         s_off = np.cumsum([0] + [s.num_scenes for s in scenes[:-1]])
         cat = lambda name, offs=None: torch.cat([  # noqa: E731
             getattr(s, name) + (int(o) if offs is not None else 0)
-            for s, o in zip(scenes, offs if offs is not None else [0] * len(scenes))])
+            for s, o in zip(scenes, offs if offs is not None else [0] * len(scenes), strict=True)])
         return Scene(
             ref_vertices=cat("ref_vertices"),
             faces=cat("faces", n_off),
             node_object=cat("node_object", o_off),
             face_object=cat("face_object", o_off),
-            mesh_edges=torch.cat([s.mesh_edges + int(o) for s, o in zip(scenes, n_off)], dim=1),
+            mesh_edges=torch.cat([s.mesh_edges + int(o) for s, o in zip(scenes, n_off, strict=True)], dim=1),
             object_kind=cat("object_kind"),
             object_props=cat("object_props"),
             object_com=cat("object_com"),
@@ -409,7 +409,8 @@ class Scene:
         if self.num_scenes != 1:
             raise ValueError("poses_from_data needs an unbatched scene")
         out = self.static_poses.double().cpu().numpy().copy()
-        for o, (q, m) in enumerate(zip(self.object_qpos_adr.tolist(), self.object_mocap.tolist())):
+        adrs = zip(self.object_qpos_adr.tolist(), self.object_mocap.tolist(), strict=True)
+        for o, (q, m) in enumerate(adrs):
             if q >= 0:
                 out[o] = data.qpos[q:q + 7]
             elif m >= 0:

@@ -127,7 +127,8 @@ class LearnedSimulator(nn.Module):
         """Graph of raw features from poses ``history float[H, O, 7]`` and ``next_kinematic float[O, 7]``."""
         H = self.config.history + 1
         if history.shape[0] != H or history.shape[1:] != (scene.num_objects, 7):
-            raise ValueError(f"history must be float[{H}, {scene.num_objects}, 7], got {tuple(history.shape)}")
+            raise ValueError(
+                f"history must be float[{H}, {scene.num_objects}, 7], got {tuple(history.shape)}")
         node_hist = scene.node_positions(history)
         com_hist = scene.com_positions(history)
         node_next = scene.node_positions(next_kinematic)
@@ -240,13 +241,13 @@ class LearnedSimulator(nn.Module):
         because rollouts are shape matched: the errors a model meets at test time are rigid too.
         The rotation's std is ``noise_std / radius`` so that node displacements are ``~noise_std``.
         """
-        H, O = hist.shape[0], hist.shape[1]
+        H, n_obj = hist.shape[0], hist.shape[1]
         sigma = self.config.noise_std / math.sqrt(max(H - 1, 1))
         dev, dt = hist.device, hist.dtype
-        dtrans = torch.randn(H - 1, O, 3, generator=gen, device=dev, dtype=dt) * sigma
+        dtrans = torch.randn(H - 1, n_obj, 3, generator=gen, device=dev, dtype=dt) * sigma
         radius = self._object_radius(scene)
-        drot = torch.randn(H - 1, O, 3, generator=gen, device=dev, dtype=dt) * (sigma / radius)[:, None]
-        zero = torch.zeros(1, O, 3, device=dev, dtype=dt)
+        drot = torch.randn(H - 1, n_obj, 3, generator=gen, device=dev, dtype=dt) * (sigma / radius)[:, None]
+        zero = torch.zeros(1, n_obj, 3, device=dev, dtype=dt)
         trans = torch.cat((zero, dtrans.cumsum(0)), 0)
         rotvec = torch.cat((zero, drot.cumsum(0)), 0)
         mask = scene.dynamic_mask[None, :, None].to(dt)

@@ -115,7 +115,7 @@ def node_accelerations(traj: Trajectory, scene: Scene) -> Tensor:
 def auto_noise_std(trajs: list[Trajectory], scenes: list[Scene], fraction: float) -> float:
     """``fraction`` x the median acceleration norm (m/step^2) of moving dynamic nodes."""
     norms = []
-    for traj, scene in zip(trajs, scenes):
+    for traj, scene in zip(trajs, scenes, strict=True):
         a = node_accelerations(traj, scene).norm(dim=-1).flatten()
         norms.append(a[a > 1e-7])
     allnorms = torch.cat(norms)
@@ -137,7 +137,7 @@ class WindowSampler:
                  still_weight: float, seed: int, accel_cap: float = 10.0) -> None:
         self.trajs, self.scenes, self.span = trajs, scenes, history + 2
         index, weight, accel = [], [], []
-        for i, (traj, scene) in enumerate(zip(trajs, scenes)):
+        for i, (traj, scene) in enumerate(zip(trajs, scenes, strict=True)):
             poses = traj.poses
             dyn = scene.dynamic_mask.numpy()
             moved = np.abs(np.diff(poses[:, dyn, :3], axis=0)).max(axis=(1, 2)) > 1e-6
