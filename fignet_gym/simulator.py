@@ -50,6 +50,10 @@ class SimulatorConfig:
             messages into every dynamic node.
         noise_std: std (m) of the random-walk training noise at the last input frame.
         vertical_weight: loss weight of the z component of accelerations (1: the paper's plain MSE).
+        gravity: known acceleration (m/s^2) of free dynamic objects. The network predicts the
+            residual ``a - g dt^2``, so free flight is exact from the start and the network's
+            precision is spent on contacts (whose large accelerations set the target scale and so
+            would otherwise limit how precisely it can output the small free-fall term).
         scene_type: what the model was trained on ("push", "toss", ...; "" = unspecified).
         mesh_options: how MuJoCo primitives are meshed for this model.
     """
@@ -66,6 +70,7 @@ class SimulatorConfig:
     kinematic_receivers: bool = False
     noise_std: float = 0.0
     vertical_weight: float = 1.0
+    gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     scene_type: str = ""
     mesh_options: MeshOptions = field(default_factory=MeshOptions)
 
@@ -87,6 +92,8 @@ class SimulatorConfig:
         if unknown:
             raise CheckpointError(f"unknown config keys {sorted(unknown)}")
         d = dict(d)
+        if "gravity" in d:
+            d["gravity"] = tuple(float(g) for g in d["gravity"])
         if isinstance(d.get("mesh_options"), dict):
             d["mesh_options"] = MeshOptions(**d["mesh_options"])
         return SimulatorConfig(**d)
@@ -160,8 +167,13 @@ class LearnedSimulator(nn.Module):
 
     # ------------------------------------------------------------------ inference
     def predict_acceleration(self, graph: Graph) -> Tensor:
-        """Per-node finite-difference acceleration (m per step^2), ``float[N, 3]``."""
-        return self.target_norm.inverse(self.net(self.normalize(graph)))
+        """Per-node finite-difference acceleration (m per step^2), ``float[N, 3]``, including the
+        gravity prior (which non-dynamic nodes also get: their prediction is never used)."""
+        return self.target_norm.inverse(self.net(self.normalize(graph))) + self.gravity_step()
+
+    def gravity_step(self) -> Tensor:
+        """The gravity prior ``g dt^2`` (m per step^2), ``float[3]``."""
+        return torch.tensor(self.config.gravity, device=self.device) * self.config.dt**2
 
     @torch.no_grad()
     def step(self, scene: Scene, history: Tensor, next_kinematic: Tensor) -> Tensor:
@@ -220,7 +232,7 @@ class LearnedSimulator(nn.Module):
         Returns:
             ``(graph, target float[N, 3], node_weight float[N])``: raw features, the acceleration
             that maps the noisy inputs onto the true next positions (plus the last frame's noise,
-            which no model can see), and a per-node loss weight (0 for non-dynamic nodes).
+            which no model can see) minus the gravity prior, and a per-node loss weight (0 for non-dynamic nodes).
         """
         hist, nxt = poses[:-1], poses[-1]
         noisy = self._pose_noise(scene, hist, generator) if self.config.noise_std > 0 else hist
@@ -230,7 +242,7 @@ class LearnedSimulator(nn.Module):
         # The model cannot know the last frame's noise, so the target keeps it; what it must learn
         # is to undo the velocity noise (as in learning_to_simulate).
         target_next = scene.node_positions(nxt) + noise_last
-        target = target_next - 2 * inputs.node_hist[-1] + inputs.node_hist[-2]
+        target = target_next - 2 * inputs.node_hist[-1] + inputs.node_hist[-2] - self.gravity_step()
         weight = scene.dynamic_mask[scene.node_object].to(target.dtype)
         return inputs.graph, target, weight
 

@@ -79,7 +79,7 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
                                    mesh_options={"cylinder_sections": 8}),
                  "training": dict(batch_size=8)},
     "toss-cpu": {"simulator": dict(latent_size=64, message_passing_steps=5, mesh_edges=False,
-                                   collision_radius=0.1, scene_type="toss"),
+                                   collision_radius=0.1, scene_type="toss", gravity=(0.0, 0.0, -10.0)),
                  "training": dict(batch_size=4)},
     "paper": {"simulator": dict(latent_size=128, message_passing_steps=10, mesh_edges=True),
               "training": dict(batch_size=8)},

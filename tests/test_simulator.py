@@ -1,6 +1,7 @@
 """The learned simulator: features, invariances, batching, integration, checkpoints, learning."""
 
 import math
+from dataclasses import replace
 
 import mujoco
 import numpy as np
@@ -120,6 +121,22 @@ def test_zero_decoder_keeps_a_resting_scene_still(push_like_xml: str) -> None:
     hist = p[None].repeat(3, 1, 1)
     traj = sim.rollout(scene, hist, p[None].repeat(20, 1, 1))
     assert torch.allclose(traj, p[None].expand_as(traj), atol=1e-6)
+
+
+def test_gravity_prior_gives_exact_discrete_free_fall(push_like_xml: str) -> None:
+    sim = LearnedSimulator(replace(SMALL, gravity=(0.0, 0.0, -9.81))).eval()
+    with torch.no_grad():
+        sim.net.decoder.rest[-1].weight.zero_()
+        sim.net.decoder.rest[-1].bias.zero_()
+    scene, _ = scene_and_history(push_like_xml)
+    p = scene.static_poses.clone()
+    p[1, 2] += 2.0  # far above the floor: no contact
+    traj = sim.rollout(scene, p[None].repeat(3, 1, 1), p[None].repeat(10, 1, 1))
+    k = torch.arange(1, 11, dtype=torch.float32)
+    # x_{t+1} = 2 x_t - x_{t-1} + g dt^2 from rest: displacement g dt^2 k (k + 1) / 2.
+    expected = p[1, 2] - 9.81 * sim.config.dt**2 * k * (k + 1) / 2
+    assert torch.allclose(traj[:, 1, 2], expected, atol=1e-5)
+    assert torch.allclose(traj[:, 0], p[0].expand(10, 7))  # the floor does not fall
 
 
 def test_checkpoint_roundtrip_and_bad_files(tmp_path, push_like_xml: str) -> None:
