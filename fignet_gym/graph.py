@@ -87,6 +87,19 @@ def with_norm(d: Tensor) -> Tensor:
     return out.reshape(*d.shape[:-1], d3.shape[-2] * 4)
 
 
+def clip_length(d: Tensor, max_len: float) -> Tensor:
+    """Shorten 3-vectors longer than ``max_len`` to that length (``max_len <= 0``: unchanged).
+
+    ``float[..., 3] -> float[..., 3]``. A floor of two 20 m triangles makes spanning vectors of
+    metres next to the centimetre ones of objects; normalised together, the small ones (the
+    geometry that matters) would be squashed to nothing. Direction is kept.
+    """
+    if max_len <= 0:
+        return d
+    n = d.norm(dim=-1, keepdim=True)
+    return d * (max_len / n.clamp_min(max_len))
+
+
 def feature_sizes(history: int, num_props: int = 3) -> dict[str, int]:
     """Input feature sizes of each graph element for ``history`` velocities."""
     node = 4 * history + num_props + 1 + 4
@@ -103,13 +116,15 @@ def _node_features(pos_hist: Tensor, kin: Tensor, kin_disp: Tensor, props: Tenso
     return torch.cat((with_norm(vel), props, kin[:, None], with_norm(kin_disp * kin[:, None])), dim=-1)
 
 
-def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts) -> tuple[Tensor, Tensor, Tensor]:
+def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, clip: float = 0.0
+                       ) -> tuple[Tensor, Tensor, Tensor]:
     """Face-face hyper-edge features (paper eq. 1) with each face's nodes sorted by distance.
 
     Args:
         pos: ``float[N, 3]`` current node positions.
         faces: ``int64[F, 3]``.
         contacts: ``C`` directed face pairs with closest points.
+        clip: spanning vectors longer than this are shortened (:func:`clip_length`; 0: off).
 
     Returns:
         ``(senders int64[C, 3], receivers int64[C, 3], features float[C, 34])`` with features
@@ -121,7 +136,7 @@ def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts) -> tu
         # Normal from the original vertex order (outward by the mesh's winding), before sorting.
         n = torch.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0], dim=-1)
         n = n / n.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-        span = x - point[:, None, :]
+        span = clip_length(x - point[:, None, :], clip)
         order = span.norm(dim=-1).argsort(dim=1, stable=True)
         nodes = torch.gather(nodes, 1, order)
         span = torch.gather(span, 1, order[..., None].expand(-1, -1, 3))
@@ -136,7 +151,7 @@ def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts) -> tu
 
 def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Tensor,
                 com_next: Tensor, contacts: FaceContacts | None,
-                node_edges: tuple[Tensor, Tensor] | None = None) -> Graph:
+                node_edges: tuple[Tensor, Tensor] | None = None, clip: float = 0.0) -> Graph:
     """Assemble all un-normalised input features.
 
     Args:
@@ -147,6 +162,8 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
         com_next: ``float[O, 3]`` next centre-of-mass positions (kinematic objects only).
         contacts: face-face contacts at the current positions (``None``: no face edges).
         node_edges: optional MeshGraphNets-style node-node collision edges ``(senders, receivers)``.
+        clip: length (m) above which face spanning vectors and object-mesh offsets are shortened
+            (0: the paper's unclipped features).
     """
     kin_obj = (scene.object_kind != ObjectKind.DYNAMIC).to(node_hist.dtype)
     kin_node = kin_obj[scene.node_object]
@@ -158,15 +175,15 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
     s, r = scene.mesh_edges
     mesh_f = torch.cat((with_norm(cur[s] - cur[r]),
                         with_norm(scene.ref_vertices[s] - scene.ref_vertices[r])), dim=-1)
-    rel = cur - cur_com[scene.node_object]
-    rel_ref = scene.ref_vertices - scene.object_com[scene.node_object]
+    rel = clip_length(cur - cur_com[scene.node_object], clip)
+    rel_ref = clip_length(scene.ref_vertices - scene.object_com[scene.node_object], clip)
     # Object->mesh: d = x_sender(object) - x_receiver(node); mesh->object is its negation.
     om_f = torch.cat((with_norm(-rel), with_norm(-rel_ref)), dim=-1)
     mo_f = torch.cat((with_norm(rel), with_norm(rel_ref)), dim=-1)
 
     empty_i = torch.zeros(0, dtype=torch.long, device=cur.device)
     if contacts is not None:
-        fs, fr, ff = face_edge_features(cur, scene.faces, contacts)
+        fs, fr, ff = face_edge_features(cur, scene.faces, contacts, clip)
     else:
         fs = fr = empty_i.reshape(0, 3)
         ff = cur.new_zeros(0, feature_sizes(1)["face"])

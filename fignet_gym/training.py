@@ -76,10 +76,12 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     # The pusher is meshed as an octagonal prism (0.4 mm from its true 4.75 mm radius): fewer faces.
     "push-cpu": {"simulator": dict(latent_size=64, message_passing_steps=5, mesh_edges=False,
                                    collision_radius=0.01, vertical_weight=0.1, scene_type="push",
+                                   feature_clip=0.1,
                                    mesh_options={"cylinder_sections": 8}),
                  "training": dict(batch_size=8)},
     "toss-cpu": {"simulator": dict(latent_size=64, message_passing_steps=5, mesh_edges=False,
-                                   collision_radius=0.1, scene_type="toss", gravity=(0.0, 0.0, -10.0)),
+                                   collision_radius=0.1, scene_type="toss", gravity=(0.0, 0.0, -10.0),
+                                   feature_clip=3.0),
                  "training": dict(batch_size=4)},
     "paper": {"simulator": dict(latent_size=128, message_passing_steps=10, mesh_edges=True),
               "training": dict(batch_size=8)},

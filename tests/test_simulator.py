@@ -202,3 +202,12 @@ def test_overfits_one_short_mujoco_trajectory(push_like_xml: str) -> None:
         opt.step()
         losses.append(loss.item())
     assert losses[-1] < 1e-2 * losses[5]
+
+
+def test_clip_length_hand_case() -> None:
+    from fignet_gym.graph import clip_length
+
+    d = torch.tensor([[3.0, 4.0, 0.0], [0.3, 0.4, 0.0], [0.0, 0.0, 0.0]])
+    out = clip_length(d, 1.0)
+    assert torch.allclose(out, torch.tensor([[0.6, 0.8, 0.0], [0.3, 0.4, 0.0], [0.0, 0.0, 0.0]]))
+    assert torch.equal(clip_length(d, 0.0), d)
