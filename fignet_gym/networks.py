@@ -1,15 +1,26 @@
 """MLPs and typed encode-process-decode message passing (FIGNet's graph network).
 
 This module knows no physics: it maps a :class:`~fignet_gym.graph.Graph` of feature tensors to one
-output vector per mesh node. Edge updates never materialise the concatenation
-``[edge, sender, receiver]`` per edge: the first layer of each edge MLP is split by input block, node
-latents are projected once per node and then gathered, which is the main saving when there are
-many more edges than nodes.
+output vector per mesh node.
+
+Edge updates are written for speed on CPU without changing the parameters (checkpoints keep
+loading) or the function computed (up to float rounding). The first layer of an edge MLP is linear
+in its concatenated input ``[edge, node_1, ..., node_k]``, so it can be evaluated in either of two
+ways, whichever needs fewer multiply-adds (:func:`edge_first_layer`):
+
+* gather the ``k`` node latents of every edge, concatenate and apply the layer (``M`` edges cost
+  ``M * k`` rows of node input), or
+* project every node once through all ``k`` weight blocks as one matmul, then sum the ``k``
+  projected rows of each edge with one ``embedding_bag`` (``N * k`` rows): better once there are
+  more edges than nodes (mesh edges), never materialising the per-edge concatenation.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
+import torch.nn.functional as F
 from torch import Tensor, nn
 
 from fignet_gym.graph import Graph
@@ -27,7 +38,7 @@ class MLP(nn.Module):
         sizes = [in_size] + [hidden] * num_hidden
         self.first = nn.Linear(sizes[0], sizes[1])
         rest: list[nn.Module] = [nn.ReLU()]
-        for a, b in zip(sizes[1:-1], sizes[2:]):
+        for a, b in zip(sizes[1:-1], sizes[2:], strict=True):
             rest += [nn.Linear(a, b), nn.ReLU()]
         rest.append(nn.Linear(sizes[-1], out_size))
         if layer_norm:
@@ -35,16 +46,120 @@ class MLP(nn.Module):
         self.rest = nn.Sequential(*rest)
 
     def forward(self, x: Tensor) -> Tensor:
-        return self.rest(self.first(x))
+        return self.forward_pre(F.linear(x, self.first.weight, self.first.bias))
 
     def forward_pre(self, pre: Tensor) -> Tensor:
-        """Finish the MLP from a first-layer pre-activation ``float[..., hidden]``."""
-        return self.rest(pre)
+        """Finish the MLP from a first-layer pre-activation ``float[..., hidden]``.
 
-    def project(self, x: Tensor, start: int, stop: int, bias: bool = False) -> Tensor:
-        """First-layer contribution of input block ``[start, stop)``: ``float[..., stop-start] -> [..., hidden]``."""
-        out = x @ self.first.weight[:, start:stop].T
-        return out + self.first.bias if bias else out
+        ``pre`` is consumed: the ReLUs run in place (no extra allocation per layer; autograd is
+        unaffected because no linear layer saves its output for backward). Layers are applied
+        through the functional API: module calls cost as much as a small layer's arithmetic.
+        The LayerNorm runs in float32 even under bfloat16 autocast, so that latents and their
+        residual sums stay float32 and only matmul inputs are rounded.
+        """
+        x = pre
+        for layer in self.rest:
+            if isinstance(layer, nn.Linear):
+                x = F.linear(x, layer.weight, layer.bias)
+            elif isinstance(layer, nn.LayerNorm):
+                x = F.layer_norm(x.float(), layer.normalized_shape, layer.weight, layer.bias, layer.eps)
+            else:
+                x = x.relu_()
+        return x
+
+
+@dataclass(frozen=True)
+class EdgeIndex:
+    """How one edge type gathers node latents, derived once per graph for all processor blocks.
+
+    Attributes:
+        nodes: ``int64[M, k]`` node of each of the ``k`` node slots of every edge, in the order of
+            the MLP input blocks after the edge latent.
+        table_rows: ``int64[M, k]`` rows ``k * node + slot`` of a ``[N * k, hidden]`` table of
+            node projections, or ``None`` when gathering latents is cheaper (``M <= N``).
+    """
+
+    nodes: Tensor
+    table_rows: Tensor | None
+
+    @staticmethod
+    def build(nodes: Tensor, num_nodes: int) -> EdgeIndex:
+        """``nodes int64[M, k]``; projecting all ``N`` nodes pays off only with more edges than nodes."""
+        k = nodes.shape[1]
+        if nodes.shape[0] <= num_nodes:
+            return EdgeIndex(nodes, None)
+        return EdgeIndex(nodes, nodes * k + torch.arange(k, device=nodes.device))
+
+
+def edge_first_layer(first: nn.Linear, e: Tensor, v: Tensor, index: EdgeIndex) -> Tensor:
+    """First layer of an edge MLP on ``[e, v[nodes[:, 0]], ..., v[nodes[:, k-1]]]``.
+
+    Args:
+        first: the layer, ``weight float[hidden, D + k * L]``.
+        e: ``float[M, D]`` edge latents.
+        v: ``float[N, L]`` node latents.
+        index: the edges' node slots.
+
+    Returns:
+        ``float[M, hidden]`` pre-activations.
+    """
+    m, k = index.nodes.shape
+    w, b = first.weight, first.bias
+    d = e.shape[1]
+    if index.table_rows is None:
+        gathered = v.index_select(0, index.nodes.reshape(-1)).view(m, k * v.shape[1])
+        return F.linear(torch.cat((e, gathered), dim=1), w, b)
+    h, n, lat = w.shape[0], v.shape[0], v.shape[1]
+    # Weight blocks of the k node slots stacked as rows ([k * hidden, L]), so that one matmul
+    # projects every node through all of them; the bias rides on slot 0, which each edge
+    # gathers exactly once.
+    w_nodes = w[:, d:].reshape(h, k, lat).transpose(0, 1).reshape(k * h, lat)
+    b_nodes = torch.cat((b, b.new_zeros((k - 1) * h)))
+    table = F.linear(v, w_nodes, b_nodes).view(n * k, h)
+    gathered = F.embedding_bag(index.table_rows, table, mode="sum")
+    return torch.addmm(gathered, e, w[:, :d].T)
+
+
+@dataclass(frozen=True)
+class Topology:
+    """Index tensors of a graph shared by every processor block (built once per forward).
+
+    Attributes:
+        num_nodes: ``N``.
+        node_object: ``int64[N]`` object of each mesh node.
+        mesh: mesh edges ``[sender, receiver]``; ``mesh_receivers int64[E]``.
+        world: node-node collision edges, likewise.
+        face: face-face hyper-edges ``[s_1, s_2, s_3, r_1, r_2, r_3]``; ``face_receivers int64[3C]``
+            the receiver node of each of the ``3C`` output vectors.
+    """
+
+    num_nodes: int
+    node_object: Tensor
+    mesh: EdgeIndex
+    mesh_receivers: Tensor
+    world: EdgeIndex
+    world_receivers: Tensor
+    face: EdgeIndex
+    face_receivers: Tensor
+
+    @staticmethod
+    def of(g: Graph) -> Topology:
+        n = g.node_features.shape[0]
+        me, we, fe = g.mesh_edges, g.node_edges, g.face_edges
+        return Topology(
+            num_nodes=n, node_object=g.node_object,
+            mesh=EdgeIndex.build(torch.stack((me.senders, me.receivers), dim=1), n),
+            mesh_receivers=me.receivers,
+            world=EdgeIndex.build(torch.stack((we.senders, we.receivers), dim=1), n),
+            world_receivers=we.receivers,
+            face=EdgeIndex.build(torch.cat((fe.senders, fe.receivers), dim=1), n),
+            face_receivers=fe.receivers.reshape(-1),
+        )
+
+
+def _sum_into(n: int, receivers: Tensor, messages: Tensor) -> Tensor:
+    """Sum ``messages float[M, L]`` per receiver: ``float[n, L]`` (message dtype, for autocast)."""
+    return messages.new_zeros(n, messages.shape[1]).index_add_(0, receivers, messages)
 
 
 class ProcessorBlock(nn.Module):
@@ -74,57 +189,59 @@ class ProcessorBlock(nn.Module):
             n_in += L
         self.mesh_node = MLP(n_in, hidden, L)
 
-    @staticmethod
-    def _edge_pre(mlp: MLP, e: Tensor, vs: Tensor, vr: Tensor, s: Tensor, r: Tensor, L: int) -> Tensor:
-        """First-layer pre-activation of ``[e, v_s, v_r]`` without concatenating per edge."""
-        return (mlp.project(e, 0, L, bias=True) + mlp.project(vs, L, 2 * L)[s]
-                + mlp.project(vr, 2 * L, 3 * L)[r])
+    def _object_pre(self, v: Tensor, o: Tensor, e_om: Tensor, e_mo: Tensor, node_obj: Tensor
+                    ) -> tuple[Tensor, Tensor]:
+        """First-layer pre-activations ``float[N, hidden]`` of the object->mesh MLP on
+        ``[e_om, o[node_obj], v]`` and of the mesh->object MLP on ``[e_mo, v, o[node_obj]]``.
 
-    def forward(self, g: Graph, v: Tensor, o: Tensor, e: dict[str, Tensor]) -> tuple[Tensor, Tensor, dict[str, Tensor]]:
-        """Update latents. ``v float[N, L]`` mesh nodes, ``o float[O, L]`` object nodes, ``e`` edge latents by type."""
+        Both node blocks of both MLPs are two matmuls: mesh nodes through the stacked mesh-node
+        weights, objects (``O`` rows, few) through the stacked object weights, then gathered.
+        """
         L = v.shape[1]
-        n = v.shape[0]
+        w_om, w_mo = self.obj_mesh.first.weight, self.mesh_obj.first.weight
+        h = w_om.shape[0]
+        w_v = torch.cat((w_om[:, 2 * L:], w_mo[:, L:2 * L]))  # [2 * hidden, L]
+        w_o = torch.cat((w_om[:, L:2 * L], w_mo[:, 2 * L:]))
+        b_o = torch.cat((self.obj_mesh.first.bias, self.mesh_obj.first.bias))
+        nodes = F.linear(v, w_v).add_(F.linear(o, w_o, b_o).index_select(0, node_obj))
+        return (torch.addmm(nodes[:, :h], e_om, w_om[:, :L].T),
+                torch.addmm(nodes[:, h:], e_mo, w_mo[:, :L].T))
+
+    def forward(self, t: Topology, v: Tensor, o: Tensor, e: dict[str, Tensor]
+                ) -> tuple[Tensor, Tensor, dict[str, Tensor]]:
+        """Update latents: ``v float[N, L]`` mesh nodes, ``o float[O, L]`` object nodes, ``e`` edge
+        latents by type (``float[E, L]``; faces ``float[C, 3, L]``)."""
+        n = t.num_nodes
         new_e: dict[str, Tensor] = {}
         agg = [v]
         if self.use_mesh:
-            s, r = g.mesh_edges.senders, g.mesh_edges.receivers
-            m = self.mesh_edge.forward_pre(self._edge_pre(self.mesh_edge, e["mesh"], v, v, s, r, L))
+            m = self.mesh_edge.forward_pre(edge_first_layer(self.mesh_edge.first, e["mesh"], v, t.mesh))
             new_e["mesh"] = e["mesh"] + m
-            agg.append(v.new_zeros(n, L).index_add_(0, r, m))
+            agg.append(_sum_into(n, t.mesh_receivers, m))
         if self.use_world:
-            s, r = g.node_edges.senders, g.node_edges.receivers
-            m = self.world_edge.forward_pre(self._edge_pre(self.world_edge, e["world"], v, v, s, r, L))
+            m = self.world_edge.forward_pre(edge_first_layer(self.world_edge.first, e["world"], v, t.world))
             new_e["world"] = e["world"] + m
-            agg.append(v.new_zeros(n, L).index_add_(0, r, m))
+            agg.append(_sum_into(n, t.world_receivers, m))
         if self.use_obj:
-            node_obj = g.node_object
-            # Exactly one object->mesh edge per mesh node, so its "sum" is the edge itself.
-            om = self.obj_mesh.forward_pre(self._edge_pre(
-                self.obj_mesh, e["obj_mesh"], o, v, node_obj, torch.arange(n, device=v.device), L))
-            mo = self.mesh_obj.forward_pre(
-                self.mesh_obj.project(e["mesh_obj"], 0, L, bias=True)
-                + self.mesh_obj.project(v, L, 2 * L) + self.mesh_obj.project(o, 2 * L, 3 * L)[node_obj])
+            pre_om, pre_mo = self._object_pre(v, o, e["obj_mesh"], e["mesh_obj"], t.node_object)
+            om, mo = self.obj_mesh.forward_pre(pre_om), self.mesh_obj.forward_pre(pre_mo)
             new_e["obj_mesh"] = e["obj_mesh"] + om
             new_e["mesh_obj"] = e["mesh_obj"] + mo
+            # Exactly one object->mesh edge per mesh node, so its "sum" is the edge itself.
             agg.append(om)
-            o_agg = o.new_zeros(o.shape).index_add_(0, node_obj, mo)
+            o_agg = _sum_into(o.shape[0], t.node_object, mo)
             o_new = o + self.obj_node(torch.cat((o, o_agg), dim=-1))
         else:
             o_new = o
         if self.use_face:
-            fs, fr = g.face_edges.senders, g.face_edges.receivers  # int64[C, 3]
-            mlp = self.face_edge
             q = e["face"]  # float[C, 3, L]
-            c = q.shape[0]
+            c, L = q.shape[0], q.shape[2]
             # Input layout per edge: [q_1, q_2, q_3, v_s1, v_s2, v_s3, v_r1, v_r2, v_r3].
-            pre = mlp.project(q.reshape(c, 3 * L), 0, 3 * L, bias=True)
-            for j in range(3):
-                pre = pre + mlp.project(v, (3 + j) * L, (4 + j) * L)[fs[:, j]]
-                pre = pre + mlp.project(v, (6 + j) * L, (7 + j) * L)[fr[:, j]]
-            m = mlp.forward_pre(pre).reshape(c, 3, L)
+            pre = edge_first_layer(self.face_edge.first, q.reshape(c, 3 * L), v, t.face)
+            m = self.face_edge.forward_pre(pre).view(c, 3, L)
             new_e["face"] = q + m
             # Each of the three output vectors goes to its own receiver node.
-            agg.append(v.new_zeros(n, L).index_add_(0, fr.reshape(-1), m.reshape(-1, L)))
+            agg.append(_sum_into(n, t.face_receivers, m.view(3 * c, L)))
         v_new = v + self.mesh_node(torch.cat(agg, dim=-1))
         return v_new, o_new, new_e
 
@@ -162,9 +279,9 @@ class EncodeProcessDecode(nn.Module):
         o = self.enc_obj(g.object_features) if self.object_nodes else v.new_zeros(0, self.latent)
         e: dict[str, Tensor] = {}
         for name, mlp in self.enc.items():
-            feats = g.edge_features(name)
-            out = mlp(feats)
-            e[name] = out.reshape(-1, 3, self.latent) if name == "face" else out
+            out = mlp(g.edge_features(name))
+            e[name] = out.view(-1, 3, self.latent) if name == "face" else out
+        topology = Topology.of(g)
         for block in self.blocks:
-            v, o, e = block(g, v, o, e)
+            v, o, e = block(topology, v, o, e)
         return self.decoder(v)
