@@ -16,6 +16,7 @@ Importing this package registers ``fignet_gym/Push-v0`` and ``fignet_gym/Toss-v0
 """
 
 import gymnasium as gym
+
 from fignet_gym.envs.base import MjDynamicsEnv
 from fignet_gym.envs.push import PushEnv, PushVectorEnv
 from fignet_gym.envs.sb3 import SB3VecEnvAdapter, make_sb3_vec_env

@@ -6,12 +6,12 @@ from typing import Any
 
 import mujoco
 import numpy as np
-from fignet_gym.envs.base import MjDynamicsEnv, layout, layout_size, wrap_angle, yaw_of
-from fignet_gym.envs.vector import BatchedVectorEnv
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 
 from fignet_gym.dynamics import Dynamics
+from fignet_gym.envs.base import MjDynamicsEnv, layout, layout_size, wrap_angle, yaw_of
+from fignet_gym.envs.vector import BatchedVectorEnv
 from fignet_gym.mjcf import push_object, push_scene_xml
 
 

@@ -14,10 +14,11 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from fignet_gym.envs.vector import BatchedVectorEnv
 from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvObs, VecEnvStepReturn
+
+from fignet_gym.envs.vector import BatchedVectorEnv
 
 
 def _unbatch_info(infos: dict[str, Any], i: int) -> dict[str, Any]:

@@ -7,12 +7,12 @@ from typing import Any
 
 import mujoco
 import numpy as np
-from fignet_gym.envs.base import MjDynamicsEnv, add_disc, layout, layout_size
-from fignet_gym.envs.vector import BatchedVectorEnv
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 
 from fignet_gym.dynamics import Dynamics
+from fignet_gym.envs.base import MjDynamicsEnv, add_disc, layout, layout_size
+from fignet_gym.envs.vector import BatchedVectorEnv
 from fignet_gym.mjcf import TossObject, toss_scene_xml, unit_shape_mesh
 
 #: The default objects: three metal cubes of Kubric's small size (flat faces: face-face contacts).

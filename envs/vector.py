@@ -19,11 +19,11 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from fignet_gym.envs.base import MjDynamicsEnv
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from fignet_gym.dynamics import DivergenceError
+from fignet_gym.envs.base import MjDynamicsEnv
 
 
 class BatchedVectorEnv(VectorEnv):

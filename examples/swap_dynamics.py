@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import argparse
 
-import fignet_gym.envs  # noqa: F401  (registers the environments)
 import gymnasium as gym
 import imageio
 import numpy as np
 import torch
+
+import fignet_gym.envs  # noqa: F401  (registers the environments)
 
 
 def main() -> None:

@@ -82,21 +82,40 @@ def test_protocol_conformance() -> None:
         make_dynamics(object())  # type: ignore[arg-type]
 
 
-def test_mujoco_step_equals_mj_step(push_model: mujoco.MjModel) -> None:
+def _integration_state(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
+    out = np.zeros(mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_INTEGRATION))
+    mujoco.mj_getState(model, data, out, mujoco.mjtState.mjSTATE_INTEGRATION)
+    return out
+
+
+def test_mujoco_step_equals_mj_step_with_the_pusher_moved_each_timestep(
+        push_model: mujoco.MjModel) -> None:
     a, b = mujoco.MjData(push_model), mujoco.MjData(push_model)
+    for d in (a, b):
+        mujoco.mj_forward(push_model, d)
     dyn = MujocoDynamics()
     path = _tip_path(push_model, 8, speed=0.5)
     for row in path:
-        for d in (a, b):
-            d.mocap_pos[0] = row[:3]
-        mujoco.mj_step(push_model, a, 10)
+        # Reference: plain mj_step, the tip moved by hand every timestep (as the data generator).
+        start = a.mocap_pos[0].copy()
+        for i in range(1, 11):
+            a.mocap_pos[0] = start + (row[:3] - start) * (i / 10)
+            mujoco.mj_step(push_model, a, 1)
+        b.mocap_pos[0] = row[:3]
         dyn.step(push_model, b, 10)
-    sa = np.zeros(mujoco.mj_stateSize(push_model, mujoco.mjtState.mjSTATE_INTEGRATION))
-    sb = np.zeros_like(sa)
-    mujoco.mj_getState(push_model, a, sa, mujoco.mjtState.mjSTATE_INTEGRATION)
-    mujoco.mj_getState(push_model, b, sb, mujoco.mjtState.mjSTATE_INTEGRATION)
-    np.testing.assert_array_equal(sa, sb)
-    np.testing.assert_array_equal(a.xpos, b.xpos)
+    np.testing.assert_allclose(_integration_state(push_model, a),
+                               _integration_state(push_model, b), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.xpos, b.xpos, rtol=0, atol=1e-12)
+
+
+def test_mujoco_step_is_mj_step_when_the_pusher_holds_still(push_model: mujoco.MjModel) -> None:
+    a, b = mujoco.MjData(push_model), mujoco.MjData(push_model)
+    a.qvel[0] = b.qvel[0] = 0.3
+    for d in (a, b):
+        mujoco.mj_forward(push_model, d)
+    mujoco.mj_step(push_model, a, 10)
+    MujocoDynamics().step(push_model, b, 10)
+    np.testing.assert_array_equal(_integration_state(push_model, a), _integration_state(push_model, b))
 
 
 def test_mujoco_rollout_equals_loop_and_mujoco_rollout(push_model: mujoco.MjModel) -> None:

@@ -6,15 +6,15 @@ import inspect
 import re
 from typing import Any
 
-import fignet_gym.envs  # noqa: F401  (registers the environments)
 import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from fignet_gym.envs import PushEnv, TossEnv
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
+import fignet_gym.envs  # noqa: F401  (registers the environments)
+from fignet_gym.envs import PushEnv, TossEnv
 from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
 
 SMALL = dict(dt=0.02, latent_size=16, message_passing_steps=2)

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from typing import Any
 
-import fignet_gym.envs  # noqa: F401  (registers the environments)
 import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from fignet_gym.envs import BatchedVectorEnv, SB3VecEnvAdapter, make_sb3_vec_env
 from gymnasium.vector import AutoresetMode
 
+import fignet_gym.envs  # noqa: F401  (registers the environments)
+from fignet_gym.envs import BatchedVectorEnv, SB3VecEnvAdapter, make_sb3_vec_env
 from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
 
 ENV_IDS = ["fignet_gym/Push-v0", "fignet_gym/Toss-v0"]
