@@ -1,10 +1,12 @@
 """Speed of one learned step against MuJoCo on the same scene (``fignet-gym bench``).
 
 Prints, for a push scene (one MIT prism, a cylindrical pusher, a floor) and a 6-object tossing scene
-of MOVi-A-like size: the median milliseconds of a learned step split into collision detection, graph
-building, network and shape matching; the number of face-face edges; and MuJoCo's time to advance the
-same scene by the same simulated time, as a ratio. Timings on shared cores are noisy: compare the
-ratios, measured in one run, rather than absolute numbers.
+of MOVi-A-like size: the median milliseconds of ``LearnedSimulator.step`` (the code path users run)
+split into collision detection, graph building, network and shape matching; the number of face-face
+edges; and MuJoCo's time to advance the same scene by the same simulated time, as a ratio. Timings on
+shared cores are noisy: compare the ratios, measured in one run, rather than absolute numbers. On a
+machine whose cores are busy, use ``--threads 1``: OpenMP threads spin-waiting for a descheduled peer
+make more threads much slower (``OMP_WAIT_POLICY=PASSIVE`` limits the damage).
 """
 
 from __future__ import annotations
@@ -12,15 +14,14 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import mujoco
 import numpy as np
 import torch
 
-from fignet_gym.collision import find_face_contacts
-from fignet_gym.geometry import kabsch
-from fignet_gym.graph import build_graph
 from fignet_gym.mjcf import TossObject, push_scene_xml, toss_scene_xml
 from fignet_gym.scene import MeshOptions, Scene
 from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
@@ -85,33 +86,66 @@ def _median_ms(samples: list[float]) -> float:
     return 1000.0 * statistics.median(samples)
 
 
-@torch.no_grad()
+class _PhaseTimer:
+    """Times the phases of the simulator's own ``step``: while active, the instance's
+    ``collide``, ``build_inputs`` and ``predict_acceleration`` are wrapped by timers (instance
+    attributes shadow the methods), so the step measured is exactly the one users run."""
+
+    PHASES = ("collide", "build_inputs", "predict_acceleration")
+
+    def __init__(self, sim: LearnedSimulator) -> None:
+        self.sim = sim
+        self.seconds: dict[str, float] = {}
+        self.face_edges = 0
+
+    def _wrap(self, name: str) -> Callable[..., Any]:
+        method = getattr(self.sim, name)
+
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            t0 = time.perf_counter()
+            out = method(*args, **kwargs)
+            self.seconds[name] = time.perf_counter() - t0
+            if name == "collide" and out[0] is not None:
+                self.face_edges = out[0].num_contacts
+            return out
+
+        return timed
+
+    def __enter__(self) -> _PhaseTimer:
+        for name in self.PHASES:
+            setattr(self.sim, name, self._wrap(name))
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for name in self.PHASES:
+            delattr(self.sim, name)
+
+
 def time_learned_step(sim: LearnedSimulator, b: BenchScene, repeats: int, batch: int = 1) -> dict[str, float]:
-    """Median ms of each phase of a learned step on ``batch`` copies of the scene."""
+    """Median ms of each phase of ``sim.step`` on ``batch`` copies of the scene.
+
+    Phases: ``collision`` (:meth:`LearnedSimulator.collide`), ``graph`` (the rest of
+    :meth:`LearnedSimulator.build_inputs`: poses to node positions and features), ``network``
+    (:meth:`LearnedSimulator.predict_acceleration`: normalisation and the graph network),
+    ``shape_match`` (the rest of the step: integration and shape matching).
+    """
     scene = b.scene.repeat(batch) if batch > 1 else b.scene
     hist = b.history.repeat(1, batch, 1)
     nxt = hist[-1]
-    parts: dict[str, list[float]] = {"collision": [], "graph": [], "network": [], "shape_match": [],
-                                     "total": []}
+    parts: dict[str, list[float]] = {k: [] for k in ("collision", "graph", "network", "shape_match", "total")}
     edges = []
-    for _ in range(repeats + 2):
-        t0 = time.perf_counter()
-        node_hist = scene.node_positions(hist)
-        contacts = find_face_contacts(node_hist[-1], scene.faces, scene.face_object,
-                                      scene.collision_pairs, sim.config.collision_radius)
-        t1 = time.perf_counter()
-        graph = build_graph(scene, node_hist, scene.com_positions(hist), scene.node_positions(nxt),
-                            scene.com_positions(nxt), contacts)
-        t2 = time.perf_counter()
-        acc = sim.predict_acceleration(graph)
-        t3 = time.perf_counter()
-        pred = 2 * node_hist[-1] - node_hist[-2] + acc
-        kabsch(scene.ref_vertices, pred, scene.node_object, scene.num_objects)
-        t4 = time.perf_counter()
-        for k, v in zip(parts, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t4 - t0)):
-            v_list = parts[k]
-            v_list.append(v)
-        edges.append(contacts.sender_face.shape[0])
+    with _PhaseTimer(sim) as timer:
+        for _ in range(repeats + 2):
+            t0 = time.perf_counter()
+            sim.step(scene, hist, nxt)
+            total = time.perf_counter() - t0
+            sec = timer.seconds
+            parts["collision"].append(sec["collide"])
+            parts["graph"].append(sec["build_inputs"] - sec["collide"])
+            parts["network"].append(sec["predict_acceleration"])
+            parts["shape_match"].append(total - sec["build_inputs"] - sec["predict_acceleration"])
+            parts["total"].append(total)
+            edges.append(timer.face_edges)
     out = {k: _median_ms(v[2:]) for k, v in parts.items()}
     out["face_edges"] = float(statistics.median(edges)) / batch
     return out
@@ -142,6 +176,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--repeats", type=int, default=20, help="timed repetitions (median reported)")
     p.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default)")
     p.add_argument("--batch", type=int, nargs="*", default=[1, 16], help="scene batch sizes")
+    p.add_argument("--dtype", choices=("float32", "bfloat16"), default="float32",
+                   help="network precision at inference (LearnedSimulator.inference_dtype)")
 
 
 def run(args: argparse.Namespace) -> None:
@@ -153,16 +189,19 @@ def run(args: argparse.Namespace) -> None:
         "cpu (latent 64, 5 MP, no mesh edges)": dict(latent_size=64, message_passing_steps=5,
                                                      mesh_edges=False),
     }
-    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads; mujoco {mujoco.__version__}")
+    dtype = getattr(torch, args.dtype)
+    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, network in {args.dtype}; "
+          f"mujoco {mujoco.__version__}")
     for b in (push_bench_scene(), toss_bench_scene()):
         mj = time_mujoco(b, args.repeats * 5)
         print(f"\n== {b.name}: {b.scene.num_objects} objects, {b.scene.num_nodes} nodes, "
               f"{b.scene.faces.shape[0]} faces, d_c = {b.radius} m; MuJoCo {b.substeps} substeps: "
               f"{mj:.3f} ms per learned-step length")
         print(f"{'model':40s} {'B':>3s} {'total':>8s} {'collide':>8s} {'graph':>7s} {'network':>8s} "
-              f"{'kabsch':>7s} {'ff-edges':>8s} {'x MuJoCo':>9s} {'coll+graph':>10s}")
+              f"{'shape':>7s} {'ff-edges':>8s} {'x MuJoCo':>9s} {'coll+graph':>10s}")
         for label, kw in configs.items():
             sim = LearnedSimulator(SimulatorConfig(collision_radius=b.radius, **kw)).eval()
+            sim.inference_dtype = dtype
             for batch in args.batch:
                 r = time_learned_step(sim, b, args.repeats, batch)
                 per = r["total"] / batch
@@ -170,8 +209,9 @@ def run(args: argparse.Namespace) -> None:
                 print(f"{label:40s} {batch:3d} {r['total']:8.2f} {r['collision']:8.2f} "
                       f"{r['graph']:7.2f} {r['network']:8.2f} {r['shape_match']:7.2f} "
                       f"{r['face_edges']:8.0f} {per / mj:9.1f} {share:10.0%}")
-    print("\nms are medians per step (for B > 1: for all B scenes at once); 'x MuJoCo' is the "
-          "per-scene learned step over MuJoCo's time for the same simulated time.")
+    print("\nms are medians per step (for B > 1: for all B scenes at once); 'shape' is integration and "
+          "shape matching; 'x MuJoCo' is the per-scene learned step over MuJoCo's time for the same "
+          "simulated time.")
 
 
 if __name__ == "__main__":

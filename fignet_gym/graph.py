@@ -130,23 +130,43 @@ def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, clip:
         ``(senders int64[C, 3], receivers int64[C, 3], features float[C, 34])`` with features
         ``[d_rs, |d_rs|, (d_sj, |d_sj|)_j, (d_rj, |d_rj|)_j, n_s, n_r]``.
     """
-    def sorted_face(face_idx: Tensor, point: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-        nodes = faces[face_idx]  # [C, 3]
-        x = pos[nodes]  # [C, 3, 3]
-        # Normal from the original vertex order (outward by the mesh's winding), before sorting.
-        n = torch.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0], dim=-1)
-        n = n / n.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-        span = clip_length(x - point[:, None, :], clip)
-        order = span.norm(dim=-1).argsort(dim=1, stable=True)
-        nodes = torch.gather(nodes, 1, order)
-        span = torch.gather(span, 1, order[..., None].expand(-1, -1, 3))
-        return nodes, span.reshape(-1, 9), n
-
-    s_nodes, s_span, n_s = sorted_face(contacts.sender_face, contacts.sender_point)
-    r_nodes, r_span, n_r = sorted_face(contacts.receiver_face, contacts.receiver_point)
+    c = contacts.sender_face.shape[0]
+    # Sender and receiver faces as one batch of 2C rows: [senders; receivers].
+    nodes = faces.index_select(0, torch.cat((contacts.sender_face, contacts.receiver_face)))
+    point = torch.cat((contacts.sender_point, contacts.receiver_point))
+    x = pos.index_select(0, nodes.reshape(-1)).view(-1, 3, 3)  # [2C, vertex, 3]
+    # Normal from the original vertex order (outward by the mesh's winding), before sorting.
+    n = torch.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0], dim=-1)
+    n = n / n.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    span = clip_length(x - point[:, None, :], clip)
+    order = span.norm(dim=-1).argsort(dim=1, stable=True)
+    nodes = torch.gather(nodes, 1, order)
+    span = torch.gather(span, 1, order[..., None].expand(-1, -1, 3))
     d_rs = contacts.receiver_point - contacts.sender_point
-    feats = torch.cat((with_norm(d_rs), with_norm(s_span), with_norm(r_span), n_s, n_r), dim=-1)
-    return s_nodes, r_nodes, feats
+    # [d_rs, sender spans, receiver spans]: with_norm appends each 3-vector's norm in one pass.
+    vecs = with_norm(torch.cat((d_rs, span[:c].reshape(c, 9), span[c:].reshape(c, 9)), dim=-1))
+    return nodes[:c], nodes[c:], torch.cat((vecs, n[:c], n[c:]), dim=-1)
+
+
+def _static_features(scene: Scene, clip: float) -> dict[str, Tensor]:
+    """Pose-independent parts of the features, cached in the scene (they never change).
+
+    Keys: ``kin float[N + O]`` kinematic flags of mesh nodes then objects, ``props float[N + O, P]``,
+    ``mesh_ref float[E, 4]`` reference mesh edge vectors with norms, ``rel_ref float[N, 4]``
+    reference (clipped) node offsets from the centre of mass with norms.
+    """
+    key = ("graph_static", clip)
+    if key not in scene._cache:
+        kin_obj = (scene.object_kind != ObjectKind.DYNAMIC).to(scene.ref_vertices.dtype)
+        s, r = scene.mesh_edges
+        ref = scene.ref_vertices
+        scene._cache[key] = {
+            "kin": torch.cat((kin_obj[scene.node_object], kin_obj)),
+            "props": torch.cat((scene.object_props[scene.node_object], scene.object_props)),
+            "mesh_ref": with_norm(ref[s] - ref[r]),
+            "rel_ref": with_norm(clip_length(ref - scene.object_com[scene.node_object], clip)),
+        }
+    return scene._cache[key]
 
 
 def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Tensor,
@@ -165,21 +185,24 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
         clip: length (m) above which face spanning vectors and object-mesh offsets are shortened
             (0: the paper's unclipped features).
     """
-    kin_obj = (scene.object_kind != ObjectKind.DYNAMIC).to(node_hist.dtype)
-    kin_node = kin_obj[scene.node_object]
-    props = scene.object_props
+    static = _static_features(scene, clip)
+    n = node_hist.shape[1]
     cur, cur_com = node_hist[-1], com_hist[-1]
-    node_f = _node_features(node_hist, kin_node, node_next - cur, props[scene.node_object])
-    obj_f = _node_features(com_hist, kin_obj, com_next - cur_com, props)
+    # Mesh and object nodes share one feature layout: one pass over the N + O points.
+    hist = torch.cat((node_hist, com_hist), dim=1)
+    all_f = _node_features(hist, static["kin"], torch.cat((node_next, com_next)) - hist[-1],
+                           static["props"])
+    node_f, obj_f = all_f[:n], all_f[n:]
 
     s, r = scene.mesh_edges
-    mesh_f = torch.cat((with_norm(cur[s] - cur[r]),
-                        with_norm(scene.ref_vertices[s] - scene.ref_vertices[r])), dim=-1)
-    rel = clip_length(cur - cur_com[scene.node_object], clip)
-    rel_ref = clip_length(scene.ref_vertices - scene.object_com[scene.node_object], clip)
-    # Object->mesh: d = x_sender(object) - x_receiver(node); mesh->object is its negation.
-    om_f = torch.cat((with_norm(-rel), with_norm(-rel_ref)), dim=-1)
-    mo_f = torch.cat((with_norm(rel), with_norm(rel_ref)), dim=-1)
+    mesh_f = torch.cat((with_norm(cur.index_select(0, s) - cur.index_select(0, r)), static["mesh_ref"]),
+                       dim=-1)
+    rel = with_norm(clip_length(cur - cur_com.index_select(0, scene.node_object), clip))
+    # Object->mesh: d = x_sender(object) - x_receiver(node); mesh->object is its negation (the
+    # norms stay).
+    flip = rel.new_tensor([-1.0, -1.0, -1.0, 1.0])
+    om_f = torch.cat((rel * flip, static["rel_ref"] * flip), dim=-1)
+    mo_f = torch.cat((rel, static["rel_ref"]), dim=-1)
 
     empty_i = torch.zeros(0, dtype=torch.long, device=cur.device)
     if contacts is not None:

@@ -54,15 +54,16 @@ class MLP(nn.Module):
         ``pre`` is consumed: the ReLUs run in place (no extra allocation per layer; autograd is
         unaffected because no linear layer saves its output for backward). Layers are applied
         through the functional API: module calls cost as much as a small layer's arithmetic.
-        The LayerNorm runs in float32 even under bfloat16 autocast, so that latents and their
-        residual sums stay float32 and only matmul inputs are rounded.
+        The LayerNorm runs in the parameters' precision even under bfloat16 autocast, so that
+        latents and their residual sums stay float32 and only matmul inputs are rounded.
         """
         x = pre
         for layer in self.rest:
             if isinstance(layer, nn.Linear):
                 x = F.linear(x, layer.weight, layer.bias)
             elif isinstance(layer, nn.LayerNorm):
-                x = F.layer_norm(x.float(), layer.normalized_shape, layer.weight, layer.bias, layer.eps)
+                x = F.layer_norm(x.to(layer.weight.dtype), layer.normalized_shape, layer.weight,
+                                 layer.bias, layer.eps)
             else:
                 x = x.relu_()
         return x
@@ -144,6 +145,7 @@ class Topology:
 
     @staticmethod
     def of(g: Graph) -> Topology:
+        """The index tensors of ``g``."""
         n = g.node_features.shape[0]
         me, we, fe = g.mesh_edges, g.node_edges, g.face_edges
         return Topology(
@@ -158,7 +160,7 @@ class Topology:
 
 
 def _sum_into(n: int, receivers: Tensor, messages: Tensor) -> Tensor:
-    """Sum ``messages float[M, L]`` per receiver: ``float[n, L]`` (message dtype, for autocast)."""
+    """Sum ``messages float[M, L]`` per receiver: ``float[n, L]`` in the messages' dtype."""
     return messages.new_zeros(n, messages.shape[1]).index_add_(0, receivers, messages)
 
 
@@ -189,57 +191,70 @@ class ProcessorBlock(nn.Module):
             n_in += L
         self.mesh_node = MLP(n_in, hidden, L)
 
-    def _object_pre(self, v: Tensor, o: Tensor, e_om: Tensor, e_mo: Tensor, node_obj: Tensor
-                    ) -> tuple[Tensor, Tensor]:
+    def _object_pre(self, v: Tensor, o: Tensor, e_om: Tensor, e_mo: Tensor | None, node_obj: Tensor
+                    ) -> list[Tensor]:
         """First-layer pre-activations ``float[N, hidden]`` of the object->mesh MLP on
-        ``[e_om, o[node_obj], v]`` and of the mesh->object MLP on ``[e_mo, v, o[node_obj]]``.
+        ``[e_om, o[node_obj], v]`` and (unless ``e_mo`` is ``None``) of the mesh->object MLP on
+        ``[e_mo, v, o[node_obj]]``.
 
-        Both node blocks of both MLPs are two matmuls: mesh nodes through the stacked mesh-node
+        The node blocks of both MLPs take two matmuls: mesh nodes through the stacked mesh-node
         weights, objects (``O`` rows, few) through the stacked object weights, then gathered.
         """
         L = v.shape[1]
-        w_om, w_mo = self.obj_mesh.first.weight, self.mesh_obj.first.weight
-        h = w_om.shape[0]
-        w_v = torch.cat((w_om[:, 2 * L:], w_mo[:, L:2 * L]))  # [2 * hidden, L]
-        w_o = torch.cat((w_om[:, L:2 * L], w_mo[:, 2 * L:]))
-        b_o = torch.cat((self.obj_mesh.first.bias, self.mesh_obj.first.bias))
+        # (MLP, edge latents, column of its mesh-node block, column of its object block)
+        parts = [(self.obj_mesh, e_om, 2 * L, L)]
+        if e_mo is not None:
+            parts.append((self.mesh_obj, e_mo, L, 2 * L))
+        w_v = torch.cat([m.first.weight[:, a:a + L] for m, _, a, _ in parts])  # [k * hidden, L]
+        w_o = torch.cat([m.first.weight[:, b:b + L] for m, _, _, b in parts])
+        b_o = torch.cat([m.first.bias for m, _, _, _ in parts])
         nodes = F.linear(v, w_v).add_(F.linear(o, w_o, b_o).index_select(0, node_obj))
-        return (torch.addmm(nodes[:, :h], e_om, w_om[:, :L].T),
-                torch.addmm(nodes[:, h:], e_mo, w_mo[:, :L].T))
+        return [torch.addmm(pre, e, m.first.weight[:, :L].T)
+                for pre, (m, e, _, _) in zip(nodes.chunk(len(parts), dim=1), parts, strict=True)]
 
-    def forward(self, t: Topology, v: Tensor, o: Tensor, e: dict[str, Tensor]
+    def forward(self, t: Topology, v: Tensor, o: Tensor, e: dict[str, Tensor], final: bool = False
                 ) -> tuple[Tensor, Tensor, dict[str, Tensor]]:
         """Update latents: ``v float[N, L]`` mesh nodes, ``o float[O, L]`` object nodes, ``e`` edge
-        latents by type (``float[E, L]``; faces ``float[C, 3, L]``)."""
+        latents by type (``float[E, L]``; faces ``float[C, 3, L]``).
+
+        ``final``: only the new ``v`` is used (the decoder reads mesh nodes only), so edge latents
+        are not updated (an empty dict is returned), nor are object nodes (``o`` is returned),
+        which also skips the mesh->object messages. Those weights of the last block never affect
+        the output, in training either.
+        """
         n = t.num_nodes
         new_e: dict[str, Tensor] = {}
         agg = [v]
         if self.use_mesh:
             m = self.mesh_edge.forward_pre(edge_first_layer(self.mesh_edge.first, e["mesh"], v, t.mesh))
-            new_e["mesh"] = e["mesh"] + m
+            if not final:
+                new_e["mesh"] = e["mesh"] + m
             agg.append(_sum_into(n, t.mesh_receivers, m))
         if self.use_world:
             m = self.world_edge.forward_pre(edge_first_layer(self.world_edge.first, e["world"], v, t.world))
-            new_e["world"] = e["world"] + m
+            if not final:
+                new_e["world"] = e["world"] + m
             agg.append(_sum_into(n, t.world_receivers, m))
+        o_new = o
         if self.use_obj:
-            pre_om, pre_mo = self._object_pre(v, o, e["obj_mesh"], e["mesh_obj"], t.node_object)
-            om, mo = self.obj_mesh.forward_pre(pre_om), self.mesh_obj.forward_pre(pre_mo)
-            new_e["obj_mesh"] = e["obj_mesh"] + om
-            new_e["mesh_obj"] = e["mesh_obj"] + mo
+            pre = self._object_pre(v, o, e["obj_mesh"], None if final else e["mesh_obj"], t.node_object)
+            om = self.obj_mesh.forward_pre(pre[0])
             # Exactly one object->mesh edge per mesh node, so its "sum" is the edge itself.
             agg.append(om)
-            o_agg = _sum_into(o.shape[0], t.node_object, mo)
-            o_new = o + self.obj_node(torch.cat((o, o_agg), dim=-1))
-        else:
-            o_new = o
+            if not final:
+                mo = self.mesh_obj.forward_pre(pre[1])
+                new_e["obj_mesh"] = e["obj_mesh"] + om
+                new_e["mesh_obj"] = e["mesh_obj"] + mo
+                o_agg = _sum_into(o.shape[0], t.node_object, mo)
+                o_new = o + self.obj_node(torch.cat((o, o_agg), dim=-1))
         if self.use_face:
             q = e["face"]  # float[C, 3, L]
             c, L = q.shape[0], q.shape[2]
             # Input layout per edge: [q_1, q_2, q_3, v_s1, v_s2, v_s3, v_r1, v_r2, v_r3].
-            pre = edge_first_layer(self.face_edge.first, q.reshape(c, 3 * L), v, t.face)
-            m = self.face_edge.forward_pre(pre).view(c, 3, L)
-            new_e["face"] = q + m
+            pre_f = edge_first_layer(self.face_edge.first, q.reshape(c, 3 * L), v, t.face)
+            m = self.face_edge.forward_pre(pre_f).view(c, 3, L)
+            if not final:
+                new_e["face"] = q + m
             # Each of the three output vectors goes to its own receiver node.
             agg.append(_sum_into(n, t.face_receivers, m.view(3 * c, L)))
         v_new = v + self.mesh_node(torch.cat(agg, dim=-1))
@@ -282,6 +297,7 @@ class EncodeProcessDecode(nn.Module):
             out = mlp(g.edge_features(name))
             e[name] = out.view(-1, 3, self.latent) if name == "face" else out
         topology = Topology.of(g)
-        for block in self.blocks:
-            v, o, e = block(topology, v, o, e)
+        last = len(self.blocks) - 1
+        for i, block in enumerate(self.blocks):
+            v, o, e = block(topology, v, o, e, final=i == last)
         return self.decoder(v)
