@@ -16,3 +16,6 @@ if [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ]; then
   touch "$STAMP"
 fi
 export MUJOCO_GL="${MUJOCO_GL:-egl}"
+# With every core busy, OpenMP threads that spin while waiting for each other make torch many times
+# slower; passive waiting costs nothing when cores are free.
+export OMP_WAIT_POLICY="${OMP_WAIT_POLICY:-PASSIVE}"
