@@ -13,7 +13,7 @@ def _train(args: argparse.Namespace) -> int:
 
     overrides = dict(json.loads(args.set)) if args.set else {}
     train_from_files(args.data, args.valid, args.config, args.out, resume=args.resume,
-                     overrides=overrides, max_train=args.max_train)
+                     overrides=overrides, max_train=args.max_train, init=args.init)
     return 0
 
 
@@ -71,6 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--out", required=True, help="run folder (checkpoints, logs)")
     t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
     t.add_argument("--max-train", type=int, help="use only the first N training trajectories")
+    t.add_argument("--init", help="start from this checkpoint's weights (fine-tuning a new run)")
     t.set_defaults(func=_train)
 
     e = sub.add_parser("evaluate", help="rollout metrics, plots and videos of a checkpoint")

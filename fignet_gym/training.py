@@ -211,7 +211,8 @@ class Trainer:
     """Trains a :class:`LearnedSimulator` on trajectory files; see the module docstring."""
 
     def __init__(self, sim_cfg: dict[str, Any], cfg: TrainConfig, train: list[Trajectory],
-                 valid: list[Trajectory], out: Path, resume: bool = False) -> None:
+                 valid: list[Trajectory], out: Path, resume: bool = False,
+                 init: str | None = None) -> None:
         self.cfg, self.out = cfg, out
         out.mkdir(parents=True, exist_ok=True)
         if cfg.threads:
@@ -244,6 +245,10 @@ class Trainer:
         self.state = TrainState()
         self.sampler = WindowSampler(train, self.train_scenes, config.history, cfg.still_weight, cfg.seed)
         self.gen = torch.Generator().manual_seed(cfg.seed)
+        if init is not None and blob is None:
+            # Fine-tuning: weights and normaliser statistics from another run, this run's recipe.
+            self.sim.load_state_dict(LearnedSimulator.load(init).state_dict())
+            print(f"initialised from {init}")
         if blob is not None:
             self.sim.load_state_dict(blob["state_dict"])
             self.opt.load_state_dict(blob["meta"]["optimizer"])
@@ -371,12 +376,12 @@ class Trainer:
 
 def train_from_files(data: str, valid: str | None, config: str | None, out: str,
                      resume: bool = False, overrides: dict[str, Any] | None = None,
-                     max_train: int | None = None) -> TrainState:
+                     max_train: int | None = None, init: str | None = None) -> TrainState:
     """Load data, build a :class:`Trainer` and run it."""
     train_trajs = load_trajectories(data)
     if max_train:
         train_trajs = train_trajs[:max_train]
     valid_trajs = load_trajectories(valid) if valid else train_trajs[-4:]
     sim_cfg, cfg = load_run_config(config, overrides)
-    trainer = Trainer(sim_cfg, cfg, train_trajs, valid_trajs, Path(out), resume=resume)
+    trainer = Trainer(sim_cfg, cfg, train_trajs, valid_trajs, Path(out), resume=resume, init=init)
     return trainer.run()
