@@ -8,7 +8,8 @@ trajectory with kinematic and static objects following their true poses:
   ``2 acos(|<q_pred, q_true>|)``, averaged over objects, at each step;
 * penetration: mean depth (m) of dynamic nodes below the floor plane ``z = 0`` per step, as a ratio
   of the prediction's to the ground truth's (MuJoCo's soft contacts penetrate a little too);
-* face-face edges per step and milliseconds per learned step.
+* collision edges per step (face-face, or node-node for the MGN baselines) and milliseconds per
+  learned step.
 
 Two reference models give the errors a scale: *no motion* (every object keeps its initial pose; the
 unit of the paper's Fig. 7c) and *constant velocity* (each object keeps its last observed velocity).
@@ -51,7 +52,7 @@ def batched_rollout(sim: LearnedSimulator, scene: Scene, true: Tensor
                     ) -> tuple[Tensor, list[int], float]:
     """Roll out from the first ``H`` rows of ``true float[H + T, O, 7]``.
 
-    Returns ``(pred float[T, O, 7], face edges per step, seconds per step)``.
+    Returns ``(pred float[T, O, 7], collision edges per step, seconds per step)``.
     """
     H = sim.config.history + 1
     dev = sim.device
@@ -62,7 +63,8 @@ def batched_rollout(sim: LearnedSimulator, scene: Scene, true: Tensor
     for t in range(H, true.shape[0]):
         nxt, inputs, _ = sim.step_with_info(scene, hist, true[t].to(dev))
         preds.append(nxt)
-        edges.append(int(inputs.graph.face_edges.senders.shape[0]))
+        g = inputs.graph  # face-face edges for FIGNet, node-node edges for the MGN baselines
+        edges.append(int(g.face_edges.senders.shape[0] + g.node_edges.senders.shape[0]))
         hist = torch.cat((hist[1:], nxt[None]), 0)
     secs = (time.perf_counter() - t0) / max(len(preds), 1)
     return torch.stack(preds).cpu(), edges, secs
@@ -121,7 +123,7 @@ def rollout_metrics(sim: LearnedSimulator, trajs: list[Trajectory], scenes: list
     still = true[H - 1][None].expand_as(gt)
     out: dict[str, Any] = {"steps": steps, "horizon_step": k + 1, "seconds": (k + 1) * sim.config.dt,
                            "trajectories": len(trajs), "ms_per_step_batched": 1000 * secs,
-                           "face_edges_per_step": float(np.mean(edges)) / len(trajs)}
+                           "collision_edges_per_step": float(np.mean(edges)) / len(trajs)}
     for name, p in (("", pred), ("still_", still), ("constvel_", constant_velocity(true, H))):
         tr, rot = errors(scene, p, gt)
         out[f"{name}translation_rmse_final"] = float(tr[k].median())
@@ -170,7 +172,7 @@ def print_table(res: dict[str, Any]) -> None:
         print(f"{label:16s} {tr:17.4f} {rot:15.2f}")
     print(f"ratio to no motion: translation {res['translation_rmse_ratio_still']:.1%}, "
           f"rotation {res['rotation_deg_ratio_still']:.1%}")
-    print(f"face-face edges per scene-step {res['face_edges_per_step']:.1f}, "
+    print(f"collision edges per scene-step {res['collision_edges_per_step']:.1f}, "
           f"{res['ms_per_step_batched']:.1f} ms per batched step, "
           f"floor penetration ratio {res['penetration_ratio']:.2f}")
 

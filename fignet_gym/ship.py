@@ -86,7 +86,8 @@ Rollouts from the first {c.history + 1} true poses; errors after {m["horizon_ste
 | constant velocity | {m["constvel_translation_rmse_final"]:.4f} | {m["constvel_rotation_deg_final"]:.2f} |
 
 Ratio to no motion: translation {m["translation_rmse_ratio_still"]:.1%}, rotation
-{m["rotation_deg_ratio_still"]:.1%}. Face-face edges per scene-step: {m["face_edges_per_step"]:.1f}.
+{m["rotation_deg_ratio_still"]:.1%}.
+Collision edges per scene-step: {m["collision_edges_per_step"]:.1f}.
 Floor penetration ratio (predicted / MuJoCo): {m["penetration_ratio"]:.2f}.
 """
 

@@ -258,7 +258,8 @@ class LearnedSimulator(nn.Module):
         Returns:
             ``(graph, target float[N, 3], node_weight float[N])``: raw features, the acceleration
             that maps the noisy inputs onto the true next positions (plus the last frame's noise,
-            which no model can see) minus the gravity prior, and a per-node loss weight (0 for non-dynamic nodes).
+            which no model can see) minus the gravity prior, and a per-node loss weight (0 for
+            non-dynamic nodes).
         """
         hist, nxt = poses[:-1], poses[-1]
         noisy = self._pose_noise(scene, hist, generator) if self.config.noise_std > 0 else hist

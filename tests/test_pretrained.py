@@ -1,0 +1,37 @@
+"""The shipped pretrained simulators and the demo that uses them (the README's main job)."""
+
+import json
+
+import pytest
+
+from fignet_gym import CheckpointError, available_pretrained, load_pretrained
+from fignet_gym.pretrained_models import pretrained_dir, pretrained_path
+
+
+def test_shipped_models_load_offline_with_model_cards() -> None:
+    assert {"push", "toss"} <= set(available_pretrained())
+    for name in ("push", "toss"):
+        path = pretrained_path(name)
+        assert path.stat().st_size < 10e6  # "a few MB"
+        sim = load_pretrained(name)
+        assert sim.config.scene_type == name and not sim.training
+        card = (pretrained_dir() / f"{name}.md").read_text()
+        assert f'load_pretrained("{name}")' in card and "CPU hours" in card
+
+
+def test_unknown_pretrained_name_lists_the_available_ones() -> None:
+    with pytest.raises(CheckpointError, match="available: .*push"):
+        load_pretrained("no-such-model")
+
+
+def test_demo_quick_run_writes_its_summary(tmp_path) -> None:
+    from fignet_gym.demo import run_demo
+
+    summary = run_demo(str(tmp_path), quick=True)
+    saved = json.loads((tmp_path / "summary.json").read_text())
+    assert set(saved) == {"push", "toss", "env"}
+    for task in ("push", "toss"):
+        res = summary[task]
+        assert res["translation_rmse_final"] >= 0 and res["still_translation_rmse_final"] > 0
+    assert (tmp_path / "push_errors.png").stat().st_size > 1000
+    assert set(saved["env"]) == {"mujoco", "fignet"}
