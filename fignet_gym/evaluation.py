@@ -219,7 +219,20 @@ def write_comparison_video(sim: LearnedSimulator, traj: Trajectory, path: Path) 
     fixed = Camera(lookat=tuple(cam.lookat), distance=float(cam.distance))
     left = render_frames(model, traj.poses, bodies, 360, 360, fixed)
     right = render_frames(model, pred_full, bodies, 360, 360, fixed)
+    left = [_label(f, "MuJoCo (ground truth)") for f in left]
+    right = [_label(f, "FIGNet rollout") for f in right]
     write_video(side_by_side(left, right), path, fps=1.0 / traj.dt)
+
+
+def _label(frame: np.ndarray, text: str) -> np.ndarray:
+    """The frame ``uint8[H, W, 3]`` with ``text`` written in its top-left corner."""
+    from PIL import Image, ImageDraw
+
+    img = Image.fromarray(frame)
+    draw = ImageDraw.Draw(img)
+    draw.rectangle((0, 0, 8 + 7 * len(text), 20), fill=(0, 0, 0))
+    draw.text((4, 4), text, fill=(255, 255, 255))
+    return np.asarray(img)
 
 
 def rollout_errors_tensor(pred: Tensor, true: Tensor, scene: Scene) -> Tensor:

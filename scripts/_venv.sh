@@ -10,9 +10,13 @@ if [ ! -x "$PY" ]; then
 fi
 STAMP="$VENV/.fignet_gym_installed"
 if [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ]; then
-  "$PY" -m pip install --quiet --upgrade pip
-  "$PY" -m pip install --quiet "torch==2.13.0"
-  "$PY" -m pip install --quiet -e "$ROOT[dev]"
+  LOG="$VENV/install.log"
+  echo "installing into $VENV (log: $LOG) ..."
+  {
+    "$PY" -m pip install --upgrade pip &&
+    "$PY" -m pip install "torch==2.13.0" &&
+    "$PY" -m pip install -e "$ROOT[dev]"
+  } > "$LOG" 2>&1 || { tail -n 40 "$LOG"; echo "installation failed (see $LOG)" >&2; exit 1; }
   touch "$STAMP"
 fi
 export MUJOCO_GL="${MUJOCO_GL:-egl}"
