@@ -2,6 +2,11 @@
 
 ``fignet-gym train --data train.h5 --valid valid.h5 --config push-cpu --out runs/push``
 
+Data-parallel training over several processes (``torchrun --nproc_per_node N -m fignet_gym train
+...``; gloo on CPU, NCCL on GPUs): each process draws its own windows, gradients are averaged across
+processes every step, rank 0's normaliser statistics are shared, and only rank 0 validates, logs
+and writes checkpoints. The model runs on CUDA when available.
+
 A run directory holds ``config.json``, ``last.pt`` (model + optimiser + sampler state, written
 atomically every ``checkpoint_every`` steps and on interruption), ``best.pt`` (lowest validation
 rollout error), ``curve.jsonl`` (one JSON line per validation: step, wall-clock CPU hours, graphs
@@ -207,6 +212,23 @@ class TrainState:
     history: list[dict[str, float]] = field(default_factory=list)
 
 
+def init_distributed() -> tuple[int, int, torch.device]:
+    """``(rank, world size, device)``; joins the process group when launched by ``torchrun``."""
+    import os
+
+    import torch.distributed as dist
+
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    local = int(os.environ.get("LOCAL_RANK", "0"))
+    cuda = torch.cuda.is_available()
+    device = torch.device(f"cuda:{local}" if cuda else "cpu")
+    if world <= 1:
+        return 0, 1, device
+    if not dist.is_initialized():
+        dist.init_process_group("nccl" if cuda else "gloo")
+    return dist.get_rank(), dist.get_world_size(), device
+
+
 class Trainer:
     """Trains a :class:`LearnedSimulator` on trajectory files; see the module docstring."""
 
@@ -214,10 +236,11 @@ class Trainer:
                  valid: list[Trajectory], out: Path, resume: bool = False,
                  init: str | None = None) -> None:
         self.cfg, self.out = cfg, out
+        self.rank, self.world, self.device = init_distributed()
         out.mkdir(parents=True, exist_ok=True)
         if cfg.threads:
             torch.set_num_threads(cfg.threads)
-        torch.manual_seed(cfg.seed)
+        torch.manual_seed(cfg.seed)  # the same initial weights in every process
         dts = {round(t.dt, 9) for t in train + valid}
         if len(dts) != 1:
             raise ValueError(f"training and validation data mix step lengths {sorted(dts)}")
@@ -238,13 +261,15 @@ class Trainer:
         self.valid_scenes = [build_scene(t, mesh_opts) for t in valid]
         if config.noise_std <= 0 and cfg.noise_fraction > 0:
             config = replace(config, noise_std=auto_noise_std(train, self.train_scenes, cfg.noise_fraction))
-        self.sim = LearnedSimulator(config)
+        self.sim = LearnedSimulator(config).to(self.device)
         self.opt = torch.optim.Adam(self.sim.parameters(), lr=cfg.lr)
         gamma = (cfg.lr_final / cfg.lr) ** (1.0 / max(cfg.steps, 1))
         self.sched = torch.optim.lr_scheduler.ExponentialLR(self.opt, gamma)
         self.state = TrainState()
-        self.sampler = WindowSampler(train, self.train_scenes, config.history, cfg.still_weight, cfg.seed)
-        self.gen = torch.Generator().manual_seed(cfg.seed)
+        # Each process draws different windows and noise.
+        seed = cfg.seed + 1000 * self.rank
+        self.sampler = WindowSampler(train, self.train_scenes, config.history, cfg.still_weight, seed)
+        self.gen = torch.Generator(device=self.device).manual_seed(seed)
         if init is not None and blob is None:
             # Fine-tuning: weights and normaliser statistics from another run, this run's recipe.
             self.sim.load_state_dict(LearnedSimulator.load(init).state_dict())
@@ -254,11 +279,45 @@ class Trainer:
             self.opt.load_state_dict(blob["meta"]["optimizer"])
             self.sched.load_state_dict(blob["meta"]["scheduler"])
             self.state = TrainState(**blob["meta"]["train_state"])
-            self.sampler.rng.bit_generator.state = json.loads(blob["meta"]["sampler_rng"])
-            self.gen.set_state(blob["meta"]["noise_rng"])
+            if self.rank == 0:  # other processes continue with fresh draws
+                self.sampler.rng.bit_generator.state = json.loads(blob["meta"]["sampler_rng"])
+                self.gen.set_state(blob["meta"]["noise_rng"])
             print(f"resumed from {last} at step {self.state.step}")
-        (out / "config.json").write_text(json.dumps(
-            {"simulator": config.to_dict(), "training": asdict(cfg)}, indent=2))
+        self._broadcast(self.sim.state_dict().values())
+        if self.rank == 0:
+            (out / "config.json").write_text(json.dumps(
+                {"simulator": config.to_dict(), "training": asdict(cfg), "processes": self.world},
+                indent=2))
+
+    # -------------------------------------------------------------- data parallelism
+    def _broadcast(self, tensors: Any) -> None:
+        """Copy rank 0's values of ``tensors`` to every process (no-op in one process)."""
+        if self.world > 1:
+            import torch.distributed as dist
+
+            for t in tensors:
+                dist.broadcast(t.data, 0)
+
+    def _average_gradients(self) -> None:
+        if self.world > 1:
+            import torch.distributed as dist
+
+            for p in self.sim.parameters():
+                if p.grad is None:
+                    p.grad = torch.zeros_like(p)
+                dist.all_reduce(p.grad)
+                p.grad /= self.world
+
+    def check_replicas(self) -> None:
+        """Raise if the processes' weights have drifted apart (they must stay identical)."""
+        if self.world > 1:
+            import torch.distributed as dist
+
+            total = torch.stack([p.detach().double().sum() for p in self.sim.parameters()]).sum()
+            gathered = [torch.zeros_like(total) for _ in range(self.world)]
+            dist.all_gather(gathered, total)
+            if any(not torch.equal(g, gathered[0]) for g in gathered):
+                raise RuntimeError(f"data-parallel replicas diverged: {[g.item() for g in gathered]}")
 
     # -------------------------------------------------------------- one step
     def batch(self) -> tuple[Scene, Tensor]:
@@ -268,10 +327,11 @@ class Trainer:
         for i, t in picks:
             p = torch.as_tensor(self.train[i].poses[t:t + self.sampler.span], dtype=torch.float32)
             if self.cfg.rotate_z:
-                p = rotate_about_z(p, float(torch.rand((), generator=self.gen)) * 2 * math.pi)
+                angle = float(torch.rand((), generator=self.gen, device=self.device)) * 2 * math.pi
+                p = rotate_about_z(p, angle)
             scenes.append(self.train_scenes[i])
             poses.append(p)
-        return Scene.batch(scenes), torch.cat(poses, dim=1)
+        return Scene.batch(scenes).to(self.device), torch.cat(poses, dim=1).to(self.device)
 
     def loss(self, scene: Scene, poses: Tensor) -> Tensor:
         """Node acceleration loss plus the per-object rigid terms, normalised by target scale."""
@@ -292,12 +352,17 @@ class Trainer:
         return base + self.cfg.rigid_loss_weight * rigid
 
     # -------------------------------------------------------------- loop
-    def run(self) -> TrainState:
-        """Train until ``cfg.steps``; checkpoints on interruption (SIGINT / SIGTERM)."""
+    def run(self, stop_after: int | None = None) -> TrainState:
+        """Train until ``cfg.steps``; checkpoints on interruption (SIGINT / SIGTERM).
+
+        ``stop_after`` ends this call after that many steps, exactly as an interruption would
+        (for time-boxed runs and tests of ``--resume``).
+        """
         from torch.utils.tensorboard import SummaryWriter
         from tqdm import tqdm
 
-        writer = SummaryWriter(str(self.out / "tb"))
+        lead = self.rank == 0
+        writer = SummaryWriter(str(self.out / "tb")) if lead else None
         stop = {"flag": False}
 
         def _stop(signum: int, _frame: object) -> None:
@@ -305,38 +370,45 @@ class Trainer:
 
         old = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
         st = self.state
-        bar = tqdm(total=self.cfg.steps, initial=st.step, desc="train", unit="step", dynamic_ncols=True)
+        bar = tqdm(total=self.cfg.steps, initial=st.step, desc="train", unit="step",
+                   dynamic_ncols=True, disable=not lead)
         t_last, c_last = time.perf_counter(), time.process_time()
+        end = self.cfg.steps if stop_after is None else min(self.cfg.steps, st.step + stop_after)
         try:
-            while st.step < self.cfg.steps and not stop["flag"]:
+            while st.step < end and not stop["flag"]:
                 self.sim.train()
                 scene, poses = self.batch()
                 loss = self.loss(scene, poses)
                 self.opt.zero_grad(set_to_none=True)
                 loss.backward()
+                self._average_gradients()
                 torch.nn.utils.clip_grad_norm_(self.sim.parameters(), 1.0)
                 self.opt.step()
+                if self.world > 1 and self.sim.target_norm.calls < self.sim.target_norm.max_accumulations:
+                    self._broadcast(b for name, b in self.sim.named_buffers())
                 self.sched.step()
                 st.step += 1
-                st.graphs_seen += self.cfg.batch_size
+                st.graphs_seen += self.cfg.batch_size * self.world
                 now, cnow = time.perf_counter(), time.process_time()
                 st.cpu_seconds += cnow - c_last
-                gps = self.cfg.batch_size / max(now - t_last, 1e-9)
+                gps = self.cfg.batch_size * self.world / max(now - t_last, 1e-9)
                 t_last, c_last = now, cnow
                 bar.update(1)
-                if st.step % 20 == 0:
+                if lead and st.step % 20 == 0:
                     bar.set_postfix(loss=f"{loss.item():.3g}", gps=f"{gps:.1f}")
                     writer.add_scalar("train/loss", loss.item(), st.step)
                     writer.add_scalar("train/lr", self.sched.get_last_lr()[0], st.step)
                     writer.add_scalar("train/graphs_per_s", gps, st.step)
-                if st.step % self.cfg.valid_every == 0 or st.step == self.cfg.steps:
+                if lead and (st.step % self.cfg.valid_every == 0 or st.step == self.cfg.steps):
                     self.validate(writer)
-                if st.step % self.cfg.checkpoint_every == 0:
+                if lead and st.step % self.cfg.checkpoint_every == 0:
                     self.checkpoint()
+            self.check_replicas()
         finally:
-            self.checkpoint()
+            if lead:
+                self.checkpoint()
+                writer.close()
             bar.close()
-            writer.close()
             for s, h in old.items():
                 signal.signal(s, h)
         return st
