@@ -11,7 +11,7 @@ import torch
 
 from fignet_gym.data.format import load_trajectories, write_trajectories
 from fignet_gym.data.generate import iter_trajectories
-from fignet_gym.training import Trainer, TrainConfig, load_run_config, rotate_about_z
+from fignet_gym.training import TrainConfig, Trainer, load_run_config, rotate_about_z
 
 TINY = {"simulator.latent_size": 8, "simulator.message_passing_steps": 1,
         "training.batch_size": 2, "training.steps": 6, "training.valid_every": 100,
