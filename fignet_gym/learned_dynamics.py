@@ -1,0 +1,457 @@
+"""The learned dynamics: a FIGNet :class:`~fignet_gym.simulator.LearnedSimulator` behind the
+:class:`~fignet_gym.dynamics.Dynamics` interface (``mj_step``-like ``step``, batched ``rollout``)."""
+
+from __future__ import annotations
+
+import math
+import os
+import weakref
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+import torch
+from torch import Tensor
+
+from fignet_gym.dynamics import (
+    STATE_SPEC,
+    DivergenceError,
+    DynamicsBase,
+    _check_rollout_inputs,
+    _set_mocap,
+)
+from fignet_gym.geometry import (
+    ShapeMatchError,
+    axis_angle_to_quat,
+    quat_conj,
+    quat_mul,
+    quat_normalize,
+    quat_to_axis_angle,
+)
+from fignet_gym.scene import ObjectKind, Scene
+from fignet_gym.simulator import LearnedSimulator
+
+
+@dataclass
+class _History:
+    """Pose history of one ``MjData`` between calls (checked against ``data`` on the next call)."""
+
+    poses: Tensor  # float[H, O, 7] on the simulator's device
+    qpos: np.ndarray  # what was written, to detect edits
+    qvel: np.ndarray
+    time: float
+
+
+@dataclass(frozen=True)
+class _SceneInfo:
+    """A model's scene (on the simulator's device) with the index arrays the step needs."""
+
+    scene: Scene
+    dyn: np.ndarray  # int[D] dynamic object indices
+    qadr: np.ndarray  # int[D] their qpos addresses
+    dadr: np.ndarray  # int[D] their qvel addresses
+    kin: np.ndarray  # int[K] kinematic object indices
+    kin_mocap: np.ndarray  # int[K] their mocap ids
+    kin_body: np.ndarray  # int[K] their body ids
+    floor_z: float  # lowest static node (m), -inf without static objects
+
+
+def _integrate_back(poses: Tensor, lin: Tensor, ang_body: Tensor, k: int, dt: float) -> Tensor:
+    """Poses ``k * dt`` earlier at constant velocity.
+
+    ``poses float[D, 7]``, ``lin float[D, 3]`` (world), ``ang_body float[D, 3]`` -> ``float[D, 7]``.
+    """
+    p = poses[:, :3] - (k * dt) * lin
+    q = quat_normalize(quat_mul(poses[:, 3:], axis_angle_to_quat(-(k * dt) * ang_body)))
+    return torch.cat((p, q), dim=-1)
+
+
+class FIGNetDynamics(DynamicsBase):
+    """A learned FIGNet simulator behind MuJoCo's step interface.
+
+    A learned step of ``sim.config.dt`` needs the last ``H = history + 1`` poses. They are kept per
+    ``MjData`` between calls and checked against ``data`` on each call: if ``time`` differs (a
+    reset) every object's history is reseeded, if only some free joints' ``qpos``/``qvel`` were
+    edited (a teleported or released object) only theirs; a reseed assumes constant velocity
+    (``qvel``: linear in the world frame, angular in the body frame) over the past ``H - 1`` steps,
+    so initial velocities are honoured from the first step. Mocap bodies are reseeded at rest at
+    their current pose (``xpos``/``xquat`` as of the last ``mj_forward``).
+
+    After the step, ``qpos`` holds the predicted poses (unit quaternions), ``qvel`` the finite
+    difference of the last two (linear world / ``dt``; angular in the body frame, the axis-angle of
+    ``q_prev^-1 q_next`` / ``dt``), ``time`` advances by ``nstep * timestep``, then ``mj_forward``.
+    When ``nstep`` spans several learned steps the mocap targets are held for all of them.
+
+    Divergence (:class:`DivergenceError`): non-finite poses, a dynamic object farther than
+    ``max_distance`` from the world origin, lower than ``fall_depth`` below the lowest static node,
+    or faster than ``max_speed``; a failed shape match counts as divergence of its batch.
+
+    Args:
+        checkpoint: a checkpoint path, a pretrained name (``"push"``) or a
+            :class:`~fignet_gym.simulator.LearnedSimulator`.
+        max_distance: m. fall_depth: m. max_speed: m/s.
+        device: where to run (default: the simulator's device).
+    """
+
+    def __init__(
+        self,
+        checkpoint: str | os.PathLike | LearnedSimulator,
+        *,
+        max_distance: float = 100.0,
+        fall_depth: float = 1.0,
+        max_speed: float = 100.0,
+        device: str | torch.device | None = None,
+    ) -> None:
+        from fignet_gym.simulator import LearnedSimulator
+
+        if isinstance(checkpoint, (str, os.PathLike)):
+            from fignet_gym.pretrained_models import resolve_checkpoint
+
+            sim = LearnedSimulator.load(resolve_checkpoint(str(checkpoint)), map_location=device or "cpu")
+        elif isinstance(checkpoint, LearnedSimulator):
+            sim = checkpoint.to(device) if device is not None else checkpoint
+        else:
+            raise TypeError(
+                f"checkpoint must be a path or a LearnedSimulator, got {type(checkpoint).__name__}"
+            )
+        self.simulator = sim.eval()
+        self.max_distance = float(max_distance)
+        self.fall_depth = float(fall_depth)
+        self.max_speed = float(max_speed)
+        self._scenes: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+        self._histories: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+    # ----------------------------------------------------------------- configuration
+    @property
+    def dt(self) -> float:
+        """Learned step length (s)."""
+        return float(self.simulator.config.dt)
+
+    def learned_steps(self, model: mujoco.MjModel, nstep: int) -> int:
+        """Learned steps in ``nstep`` MuJoCo timesteps (``ValueError`` unless a whole number)."""
+        ratio = nstep * float(model.opt.timestep) / self.dt
+        k = round(ratio)
+        if k < 1 or abs(ratio - k) > 1e-6:
+            raise ValueError(
+                f"FIGNetDynamics: {nstep} x timestep {model.opt.timestep:g} s = "
+                f"{nstep * model.opt.timestep:g} s "
+                f"is not a whole number of learned steps of {self.dt:g} s; use nstep = "
+                f"{self.dt / model.opt.timestep:g} (one learned step) or a multiple"
+            )
+        return k
+
+    def validate(self, model: mujoco.MjModel, nstep: int, scene_type: str = "") -> None:
+        """Check the checkpoint's scene type, the step length and that the model can be meshed."""
+        trained = self.simulator.config.scene_type
+        if scene_type and trained and trained != scene_type:
+            raise ValueError(
+                f"the checkpoint was trained on '{trained}' scenes, not '{scene_type}': "
+                f"pass a '{scene_type}' checkpoint"
+            )
+        self.learned_steps(model, nstep)
+        self._scene_info(model)
+
+    def _scene_info(self, model: mujoco.MjModel) -> _SceneInfo:
+        info = self._scenes.get(model)
+        if info is None:
+            scene = Scene.from_mjmodel(model, self.simulator.config.mesh_options).to(
+                self.simulator.device
+            )
+            kind = scene.object_kind.cpu().numpy()
+            dyn = np.flatnonzero(kind == ObjectKind.DYNAMIC)
+            kin = np.flatnonzero(kind == ObjectKind.KINEMATIC)
+            static = scene.object_kind[scene.node_object] == ObjectKind.STATIC
+            floor_z = -math.inf
+            if bool(static.any()):
+                nodes = scene.node_positions(scene.static_poses)
+                floor_z = float(nodes[static, 2].min())
+            info = _SceneInfo(
+                scene,
+                dyn,
+                scene.object_qpos_adr.cpu().numpy()[dyn],
+                scene.object_dof_adr.cpu().numpy()[dyn],
+                kin,
+                scene.object_mocap.cpu().numpy()[kin],
+                scene.object_body.cpu().numpy()[kin],
+                floor_z,
+            )
+            self._scenes[model] = info
+        return info
+
+    # ----------------------------------------------------------------- history
+    def _current(self, info: _SceneInfo, data: mujoco.MjData) -> tuple[Tensor, Tensor, Tensor]:
+        """Current poses ``float[O, 7]``, dynamic linear (world) and angular (body) velocities
+        ``float[D, 3]``."""
+        poses = info.scene.static_poses.double().cpu().numpy().copy()
+        poses[info.dyn] = data.qpos[info.qadr[:, None] + np.arange(7)]
+        quat = data.xquat[info.kin_body]
+        use_x = np.linalg.norm(quat, axis=1) > 0.5  # xquat is zero until the first mj_forward
+        poses[info.kin, :3] = np.where(
+            use_x[:, None], data.xpos[info.kin_body], data.mocap_pos[info.kin_mocap]
+        )
+        poses[info.kin, 3:] = np.where(use_x[:, None], quat, data.mocap_quat[info.kin_mocap])
+        vel = data.qvel[info.dadr[:, None] + np.arange(6)]
+        f = lambda x: torch.as_tensor(x, dtype=torch.float32, device=self.simulator.device)  # noqa: E731
+        p = f(poses)
+        p[:, 3:] = quat_normalize(p[:, 3:])
+        return p, f(vel[:, :3]), f(vel[:, 3:])
+
+    def _seed(
+        self, info: _SceneInfo, data: mujoco.MjData, objects: np.ndarray | None, old: Tensor | None
+    ) -> Tensor:
+        """History ``float[H, O, 7]`` reseeded for dynamic ``objects`` (all if ``old`` is None)."""
+        H = self.simulator.config.history + 1
+        cur, lin, ang = self._current(info, data)
+        if old is None:
+            hist = cur[None].repeat(H, 1, 1)
+            sel = np.arange(len(info.dyn))
+        else:
+            hist = old.clone()
+            sel = np.flatnonzero(np.isin(info.dyn, objects))
+        idx = torch.as_tensor(info.dyn[sel], device=hist.device)
+        for k in range(H):
+            hist[H - 1 - k, idx] = _integrate_back(cur[idx], lin[sel], ang[sel], k, self.dt)
+        return hist
+
+    def _history(self, info: _SceneInfo, data: mujoco.MjData) -> Tensor:
+        """The valid history of ``data`` ``float[H, O, 7]``, reseeding what ``data`` contradicts."""
+        h = self._histories.get(data)
+        if h is None or h.time != data.time or h.qpos.shape != data.qpos.shape:
+            return self._seed(info, data, None, None)
+        qa = info.qadr[:, None] + np.arange(7)
+        da = info.dadr[:, None] + np.arange(6)
+        edited = (data.qpos[qa] != h.qpos[qa]).any(1) | (data.qvel[da] != h.qvel[da]).any(1)
+        if edited.any():
+            return self._seed(info, data, info.dyn[edited], h.poses)
+        return h.poses
+
+    def _targets(self, info: _SceneInfo, last: Tensor, pos: np.ndarray, quat: np.ndarray) -> Tensor:
+        """Next poses ``float[B*O, 7]`` of ``B`` scenes: ``last`` with kinematic rows replaced by
+        their mocap targets ``pos float[B, K, 3]``, ``quat float[B, K, 4]``."""
+        nxt = last.clone()
+        if len(info.kin):
+            B, n_obj = pos.shape[0], info.scene.num_objects
+            tgt = torch.as_tensor(
+                np.concatenate((pos, quat), -1).reshape(-1, 7),
+                dtype=torch.float32,
+                device=nxt.device,
+            )
+            tgt[:, 3:] = quat_normalize(tgt[:, 3:])
+            rows = (np.arange(B)[:, None] * n_obj + info.kin[None]).ravel()
+            nxt[torch.as_tensor(rows, device=nxt.device)] = tgt
+        return nxt
+
+    # ----------------------------------------------------------------- stepping
+    def _advance(
+        self,
+        info: _SceneInfo,
+        hist: Tensor,
+        target: Tensor,
+        B: int,
+        nlearn: int,
+        t0: Sequence[float],
+        dead: Sequence[int] = (),
+    ) -> tuple[Tensor, dict[int, str]]:
+        """``nlearn`` batched learned steps of ``B`` copies of ``info.scene``.
+
+        ``hist float[H, B*O, 7]``, ``target float[B*O, 7]`` -> final history ``float[H, B*O, 7]``
+        and the reasons of the scenes that diverged, which are frozen at their last good poses from
+        on (so that nothing non-finite ever enters the graph). Scenes in ``dead`` stay frozen.
+        """
+        scene = info.scene.repeat(B)
+        n_obj = info.scene.num_objects
+        dyn = scene.dynamic_mask
+        bad: dict[int, str] = {}
+        finite = (
+            (torch.isfinite(hist).all(0).all(-1) & torch.isfinite(target).all(-1))
+            .view(B, n_obj)
+            .all(1)
+        )
+        for b in torch.nonzero(~finite).flatten().tolist():
+            bad[b] = f"non-finite state (qpos, qvel or mocap) at t={t0[b]:.3f}s"
+        frozen = torch.zeros(B, dtype=torch.bool, device=hist.device)
+        frozen[list(bad) + list(dead)] = True
+        if bool(frozen.any()):  # stand-in poses for frozen scenes: their reference configuration
+            per_obj = frozen.repeat_interleave(n_obj)
+            hist = torch.where(
+                per_obj[None, :, None] & ~torch.isfinite(hist), scene.static_poses[None], hist
+            )
+            target = torch.where(
+                per_obj[:, None] & ~torch.isfinite(target), scene.static_poses, target
+            )
+        for k in range(nlearn):
+            try:
+                nxt = self.simulator.step(scene, hist, target)
+            except (ShapeMatchError, torch.linalg.LinAlgError) as err:
+                reason = f"learned step failed at t={t0[0] + (k + 1) * self.dt:.3f}s: {err}"
+                return hist, {b: bad.get(b, reason) for b in range(B) if b not in dead}
+            sick = self._sick(nxt, hist[-1], dyn, info.floor_z)
+            if bool(sick.any()):
+                for b in torch.nonzero(sick.view(B, n_obj).any(1)).flatten().tolist():
+                    if b not in bad and not bool(frozen[b]):
+                        bad[b] = self._describe(
+                            nxt, hist[-1], b, n_obj, info, t0[b] + (k + 1) * self.dt
+                        )
+                        frozen[b] = True
+            if bool(frozen.any()):
+                nxt = torch.where(frozen.repeat_interleave(n_obj)[:, None], hist[-1], nxt)
+            hist = torch.cat((hist[1:], nxt[None]), dim=0)
+        return hist, bad
+
+    def _sick(self, nxt: Tensor, cur: Tensor, dyn: Tensor, floor_z: float) -> Tensor:
+        """``bool[B*O]``: dynamic objects whose next pose is non-finite or runaway."""
+        p = nxt[:, :3]
+        bad = ~torch.isfinite(nxt).all(-1)
+        bad |= p.norm(dim=-1) > self.max_distance
+        bad |= p[:, 2] < floor_z - self.fall_depth
+        bad |= (p - cur[:, :3]).norm(dim=-1) > self.max_speed * self.dt
+        return bad & dyn
+
+    def _describe(
+        self, nxt: Tensor, cur: Tensor, b: int, n_obj: int, info: _SceneInfo, t: float
+    ) -> str:
+        """Human-readable reason for the first sick dynamic object of scene ``b``."""
+        for o in info.dyn:
+            p, c = nxt[b * n_obj + o], cur[b * n_obj + o]
+            name = info.scene.object_names[o]
+            if not bool(torch.isfinite(p).all()):
+                return f"learned dynamics diverged: object '{name}' is non-finite at t={t:.3f}s"
+            pos = p[:3].tolist()
+            where = f"object '{name}' at ({pos[0]:.3g}, {pos[1]:.3g}, {pos[2]:.3g}) m at t={t:.3f}s"
+            if float(p[:3].norm()) > self.max_distance:
+                limit = f"max_distance={self.max_distance:g} m"
+                return f"learned dynamics diverged: {where} is beyond {limit}"
+            if float(p[2]) < info.floor_z - self.fall_depth:
+                return (
+                    f"learned dynamics diverged: {where} fell {self.fall_depth:g} m below the floor"
+                )
+            speed = float((p[:3] - c[:3]).norm()) / self.dt
+            if speed > self.max_speed:
+                return (
+                    f"learned dynamics diverged: {where} moves at {speed:.3g} m/s "
+                    f"(max_speed={self.max_speed:g})"
+                )
+        return "learned dynamics diverged"
+
+    def _pose_velocity(
+        self, info: _SceneInfo, hist: Tensor, B: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Dynamic objects' last poses ``float64[B, D, 7]`` (unit quaternions) and finite-difference
+        velocities ``float64[B, D, 6]`` (linear world, angular body: axis-angle of
+        ``q_prev^-1 q_next``, both / ``dt``) from ``hist float[H, B*O, 7]``."""
+        n_obj = info.scene.num_objects
+        cur = hist[-1].view(B, n_obj, 7)[:, info.dyn]
+        prev = hist[-2].view(B, n_obj, 7)[:, info.dyn]
+        q = quat_normalize(cur[..., 3:])
+        lin = (cur[..., :3] - prev[..., :3]) / self.dt
+        ang = quat_to_axis_angle(quat_mul(quat_conj(quat_normalize(prev[..., 3:])), q)) / self.dt
+        pose = torch.cat((cur[..., :3], q), -1).double().cpu().numpy()
+        return pose, torch.cat((lin, ang), -1).double().cpu().numpy()
+
+    def step(self, model: mujoco.MjModel, data: mujoco.MjData, nstep: int = 1) -> None:
+        """Advance ``data`` by ``nstep`` timesteps (whole learned steps); see the class doc."""
+        try:
+            self.step_many(model, [data], nstep)
+        except DivergenceError as err:
+            raise DivergenceError(err.reasons[0]) from None
+
+    def step_many(
+        self, model: mujoco.MjModel, datas: Sequence[mujoco.MjData], nstep: int = 1
+    ) -> None:
+        """All ``datas`` in one batched graph per learned step; see :meth:`Dynamics.step_many`."""
+        nlearn = self.learned_steps(model, nstep)
+        info = self._scene_info(model)
+        B = len(datas)
+        if B == 0:
+            return
+        hists = [self._history(info, d) for d in datas]
+        hist = torch.cat(hists, dim=1)
+        m = info.kin_mocap
+        pos = np.stack([d.mocap_pos[m] for d in datas])
+        quat = np.stack([d.mocap_quat[m] for d in datas])
+        target = self._targets(info, hist[-1], pos, quat)
+        hist, bad = self._advance(info, hist, target, B, nlearn, [d.time for d in datas])
+        pose, vel = self._pose_velocity(info, hist, B)
+        n_obj = info.scene.num_objects
+        qa = info.qadr[:, None] + np.arange(7)
+        da = info.dadr[:, None] + np.arange(6)
+        for b, d in enumerate(datas):
+            if b in bad:
+                self._histories.pop(d, None)
+                continue
+            d.qpos[qa] = pose[b]
+            d.qvel[da] = vel[b]
+            d.time += nstep * float(model.opt.timestep)
+            mujoco.mj_forward(model, d)
+            # A view into the batch: histories are never modified in place.
+            h = hist[:, b * n_obj : (b + 1) * n_obj]
+            self._histories[d] = _History(h, d.qpos.copy(), d.qvel.copy(), float(d.time))
+        if bad:
+            order = sorted(bad)
+            raise DivergenceError(
+                "; ".join(f"[{b}] {bad[b]}" for b in order), order, [bad[b] for b in order]
+            )
+
+    def rollout(
+        self,
+        model: mujoco.MjModel,
+        initial_state: np.ndarray,
+        control: np.ndarray | None = None,
+        nstep: int | None = None,
+        *,
+        frame_skip: int = 1,
+    ) -> np.ndarray:
+        """All ``B`` rollouts in one batched graph per learned step.
+
+        Args:
+            initial_state: ``float64[B or 1, nstate]`` (``mjSTATE_FULLPHYSICS``); free-joint
+                velocities seed the history (constant-velocity back-extrapolation).
+            control: ``float64[B or 1, nstep, nmocap * 7]`` mocap targets (positions, then
+                quaternions); mocap bodies start at rest at ``control[:, 0]``.
+            nstep: number of recorded states (default: ``control.shape[1]``).
+            frame_skip: MuJoCo timesteps per recorded state; ``frame_skip * timestep`` must be a
+                whole number of learned steps.
+
+        Returns:
+            ``float64[B, nstep, nstate]``; a rollout that diverges is NaN from that step on.
+        """
+        state, control, nstep = _check_rollout_inputs(model, initial_state, control, nstep)
+        nlearn = self.learned_steps(model, frame_skip)
+        info = self._scene_info(model)
+        B, nstate = state.shape
+        scratch = mujoco.MjData(model)
+        hists, times = [], []
+        for b in range(B):
+            mujoco.mj_setState(model, scratch, state[b], STATE_SPEC)
+            _set_mocap(model, scratch, control[b, 0])
+            scratch.xquat[:] = 0.0  # mocap bodies start at control[:, 0]
+            hists.append(self._seed(info, scratch, None, None))
+            times.append(float(scratch.time))
+        hist = torch.cat(hists, dim=1)
+        out = np.full((B, nstep, nstate), np.nan)
+        dead: set[int] = set()
+        qa = info.qadr[:, None] + np.arange(7)
+        da = info.dadr[:, None] + np.arange(6)
+        nm = model.nmocap
+        mocap_pos = control[..., : 3 * nm].reshape(B, nstep, nm, 3)[:, :, info.kin_mocap]
+        mocap_quat = control[..., 3 * nm :].reshape(B, nstep, nm, 4)[:, :, info.kin_mocap]
+        for t in range(nstep):
+            target = self._targets(info, hist[-1], mocap_pos[:, t], mocap_quat[:, t])
+            times_t = [x + t * nlearn * self.dt for x in times]
+            hist, bad = self._advance(info, hist, target, B, nlearn, times_t, sorted(dead))
+            dead |= set(bad)
+            pose, vel = self._pose_velocity(info, hist, B)
+            for b in range(B):
+                if b in dead:
+                    continue
+                mujoco.mj_setState(model, scratch, state[b], STATE_SPEC)
+                scratch.qpos[qa] = pose[b]
+                scratch.qvel[da] = vel[b]
+                scratch.time = state[b, 0] + (t + 1) * frame_skip * float(model.opt.timestep)
+                mujoco.mj_getState(model, scratch, out[b, t], STATE_SPEC)
+        return out
+
+    def forget(self, data: mujoco.MjData) -> None:
+        """Drop the stored history of ``data`` (the next step reseeds it from ``qpos``/``qvel``)."""
+        self._histories.pop(data, None)
