@@ -10,6 +10,7 @@ import mujoco
 import numpy as np
 import pytest
 import torch
+from sim_factories import wild_simulator
 from stable_baselines3.common.callbacks import BaseCallback
 
 import fignet_gym.envs  # noqa: F401  (registers the environments)
@@ -44,11 +45,6 @@ def small_simulator() -> LearnedSimulator:
     return LearnedSimulator(cfg).eval()
 
 
-def wild_simulator() -> LearnedSimulator:
-    """An untrained model with huge accelerations: every rollout diverges on its first step."""
-    sim = small_simulator()
-    sim.target_norm.accumulate(torch.randn(1000, 3, dtype=torch.float64) * 50.0)
-    return sim
 
 
 def contact_scene(env: gym.Env) -> None:
@@ -165,7 +161,8 @@ class RaisingRolloutDynamics(DynamicsBase):
 @pytest.mark.parametrize("planner_cls, config", PLANNERS)
 @pytest.mark.parametrize(
     "make_dyn",
-    [NaNDynamics, RaisingStepDynamics, RaisingRolloutDynamics, lambda: FIGNetDynamics(wild_simulator())],
+    [NaNDynamics, RaisingStepDynamics, RaisingRolloutDynamics,
+     lambda: FIGNetDynamics(wild_simulator("push"))],
     ids=["nan", "raising-step", "raising-rollout", "fignet-wild"],
 )
 def test_all_rollouts_diverging_gives_finite_action(planner_cls: type, config: Any, make_dyn: Any) -> None:

@@ -7,7 +7,7 @@ from typing import Any
 import mujoco
 import numpy as np
 import pytest
-import torch
+from sim_factories import quiet_simulator, wild_simulator, zero_simulator
 
 from fignet_gym.dynamics import (
     CONTROL_SPEC,
@@ -21,32 +21,6 @@ from fignet_gym.dynamics import (
     rollout_loop,
 )
 from fignet_gym.mjcf import TossObject, push_scene_xml, toss_scene_xml
-from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
-
-SMALL = dict(dt=0.02, latent_size=16, message_passing_steps=2)
-
-
-def zero_simulator(scene_type: str = "") -> LearnedSimulator:
-    """An untrained model whose network outputs exactly zero: objects keep their velocity."""
-    sim = LearnedSimulator(SimulatorConfig(**SMALL, scene_type=scene_type)).eval()
-    with torch.no_grad():
-        for p in sim.net.parameters():
-            p.zero_()
-    return sim
-
-
-def quiet_simulator(scene_type: str = "") -> LearnedSimulator:
-    """An untrained model with small output statistics: junk motion, but bounded."""
-    sim = LearnedSimulator(SimulatorConfig(**SMALL, scene_type=scene_type)).eval()
-    sim.target_norm.accumulate(torch.randn(1000, 3, dtype=torch.float64) * 1e-4)
-    return sim
-
-
-def wild_simulator() -> LearnedSimulator:
-    """An untrained model with huge accelerations: it diverges on its first step."""
-    sim = LearnedSimulator(SimulatorConfig(**SMALL)).eval()
-    sim.target_norm.accumulate(torch.randn(1000, 3, dtype=torch.float64) * 50.0)
-    return sim
 
 
 @pytest.fixture(scope="module")

@@ -9,32 +9,20 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
-import torch
 from gymnasium.utils.env_checker import check_env as gym_check_env
+from sim_factories import quiet_simulator, wild_simulator
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.envs import PushEnv, TossEnv
-from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
 
-SMALL = dict(dt=0.02, latent_size=16, message_passing_steps=2)
 ENV_IDS = ["fignet_gym/Push-v0", "fignet_gym/Toss-v0"]
 #: Keep learned Toss steps cheap in tests: 3 learned steps per toss instead of 50.
 FAST = {"fignet_gym/Push-v0": {}, "fignet_gym/Toss-v0": {"settle_steps": 3}}
 
 
-def quiet_simulator(scene_type: str = "") -> LearnedSimulator:
-    """An untrained model with small output statistics: junk motion, but bounded."""
-    sim = LearnedSimulator(SimulatorConfig(**SMALL, scene_type=scene_type)).eval()
-    sim.target_norm.accumulate(torch.randn(1000, 3, dtype=torch.float64) * 1e-4)
-    return sim
 
 
-def wild_simulator() -> LearnedSimulator:
-    """An untrained model with huge accelerations: it diverges on its first step."""
-    sim = LearnedSimulator(SimulatorConfig(**SMALL)).eval()
-    sim.target_norm.accumulate(torch.randn(1000, 3, dtype=torch.float64) * 50.0)
-    return sim
 
 
 def make_kwargs(env_id: str, dynamics: str) -> dict[str, Any]:

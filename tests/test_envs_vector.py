@@ -7,21 +7,17 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
-import torch
 from gymnasium.vector import AutoresetMode
+from sim_factories import quiet_simulator
 
 import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.envs import BatchedVectorEnv, SB3VecEnvAdapter, make_sb3_vec_env
-from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
+from fignet_gym.simulator import LearnedSimulator
 
 ENV_IDS = ["fignet_gym/Push-v0", "fignet_gym/Toss-v0"]
 FAST = {"fignet_gym/Push-v0": {}, "fignet_gym/Toss-v0": {"settle_steps": 3}}
 
 
-def quiet_simulator() -> LearnedSimulator:
-    sim = LearnedSimulator(SimulatorConfig(dt=0.02, latent_size=16, message_passing_steps=2)).eval()
-    sim.target_norm.accumulate(torch.randn(1000, 3, dtype=torch.float64) * 1e-4)
-    return sim
 
 
 def make_kwargs(env_id: str, dynamics: str, sim: LearnedSimulator | None = None) -> dict[str, Any]:
