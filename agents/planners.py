@@ -133,11 +133,15 @@ class SamplingPlanner:
         last: :class:`PlanInfo` of the last call.
     """
 
+    #: The settings type of a subclass (its default configuration when none is given).
+    config_class: type[CEMConfig] | type[MPPIConfig]
+
     def __init__(
-        self, dynamics: Dynamics, config: CEMConfig | MPPIConfig, env: gym.Env | None = None
+        self, dynamics: Dynamics, config: CEMConfig | MPPIConfig | None = None,
+        env: gym.Env | None = None,
     ) -> None:
         self.dynamics = dynamics
-        self.config = config
+        self.config = config or self.config_class()
         self.task: PushTask | None = None
         self.last: PlanInfo | None = None
         self.reset()
@@ -196,6 +200,14 @@ class SamplingPlanner:
         samples = np.clip(mean + std * noise, -1.0, 1.0)
         return np.concatenate([mean[None], samples])
 
+    def _scored_samples(self, mean: np.ndarray, std: np.ndarray | float, phys: np.ndarray,
+                        mocap: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Candidates around ``mean``, their costs and which are finite:
+        ``(float64[B, T, 2], float64[B], bool[B])``."""
+        actions = self._sample(mean, std)
+        cost = self.costs(phys, mocap, actions)
+        return actions, cost, np.isfinite(cost)
+
     def costs(self, phys: np.ndarray, mocap: np.ndarray, actions: np.ndarray) -> np.ndarray:
         """Cost of candidate action sequences, from one batched rollout.
 
@@ -233,11 +245,7 @@ class CEMPlanner(SamplingPlanner):
     """
 
     config: CEMConfig
-
-    def __init__(
-        self, dynamics: Dynamics, config: CEMConfig | None = None, env: gym.Env | None = None
-    ) -> None:
-        super().__init__(dynamics, config or CEMConfig(), env)
+    config_class = CEMConfig
 
     def _optimise(self, phys: np.ndarray, mocap: np.ndarray) -> tuple[float, int, int]:
         cfg = self.config
@@ -245,9 +253,8 @@ class CEMPlanner(SamplingPlanner):
         std = np.full_like(mean, cfg.noise_std)
         best, best_cost, diverged = mean, np.inf, 0
         for _ in range(cfg.iterations):
-            actions = self._sample(mean, std)
-            cost = self.costs(phys, mocap, actions)
-            ok = np.flatnonzero(np.isfinite(cost))
+            actions, cost, finite = self._scored_samples(mean, std, phys, mocap)
+            ok = np.flatnonzero(finite)
             diverged += len(cost) - len(ok)
             if not len(ok):
                 continue  # nothing to learn from: resample around the same distribution
@@ -271,19 +278,13 @@ class MPPIPlanner(SamplingPlanner):
     """
 
     config: MPPIConfig
-
-    def __init__(
-        self, dynamics: Dynamics, config: MPPIConfig | None = None, env: gym.Env | None = None
-    ) -> None:
-        super().__init__(dynamics, config or MPPIConfig(), env)
+    config_class = MPPIConfig
 
     def _optimise(self, phys: np.ndarray, mocap: np.ndarray) -> tuple[float, int, int]:
         cfg = self.config
         mean, best_cost, diverged = self.plan_actions.copy(), np.inf, 0
         for _ in range(cfg.iterations):
-            actions = self._sample(mean, cfg.noise_std)
-            cost = self.costs(phys, mocap, actions)
-            ok = np.isfinite(cost)
+            actions, cost, ok = self._scored_samples(mean, cfg.noise_std, phys, mocap)
             diverged += int((~ok).sum())
             if not ok.any():
                 continue

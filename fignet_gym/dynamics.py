@@ -92,7 +92,7 @@ class Dynamics(Protocol):
         frame_skip: int = 1,
     ) -> np.ndarray:
         """Open-loop rollouts: ``float64[B, nstate]`` states and ``float64[B, nstep, nmocap * 7]``
-        mocap controls (each held for ``frame_skip`` timesteps) -> ``float64[B, nstep, nstate]``."""
+        mocap targets (each reached over ``frame_skip`` timesteps) -> ``float64[B, nstep, nstate]``."""
         ...
 
     def validate(self, model: mujoco.MjModel, nstep: int, scene_type: str = "") -> None:

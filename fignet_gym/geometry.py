@@ -116,6 +116,12 @@ def quat_to_axis_angle(q: Tensor) -> Tensor:
     return q[..., 1:] * scale
 
 
+def segment_sum(values: Tensor, segment: Tensor, num_segments: int) -> Tensor:
+    """Sum rows by segment: ``float[N, ...]``, ``int64[N]`` in ``[0, num_segments)`` -> ``float[S, ...]``."""
+    out = values.new_zeros(num_segments, *values.shape[1:])
+    return out.index_add_(0, segment, values)
+
+
 def kabsch(
     reference: Tensor, target: Tensor, segment: Tensor, num_segments: int,
     weights: Tensor | None = None, min_singular: float = 1e-9,
@@ -138,17 +144,14 @@ def kabsch(
     """
     dev, dt = reference.device, reference.dtype
     w = torch.ones(reference.shape[0], device=dev, dtype=dt) if weights is None else weights
-    wsum = torch.zeros(num_segments, device=dev, dtype=dt).index_add_(0, segment, w)
+    wsum = segment_sum(w, segment, num_segments)
     if bool((wsum <= 0).any()):
         raise ShapeMatchError("kabsch: an object has no points to fit")
-    c_ref = torch.zeros(num_segments, 3, device=dev, dtype=dt).index_add_(
-        0, segment, reference * w[:, None]) / wsum[:, None]
-    c_tgt = torch.zeros(num_segments, 3, device=dev, dtype=dt).index_add_(
-        0, segment, target * w[:, None]) / wsum[:, None]
+    c_ref = segment_sum(reference * w[:, None], segment, num_segments) / wsum[:, None]
+    c_tgt = segment_sum(target * w[:, None], segment, num_segments) / wsum[:, None]
     p = reference - c_ref[segment]
     q = target - c_tgt[segment]
-    cov = torch.zeros(num_segments, 3, 3, device=dev, dtype=dt).index_add_(
-        0, segment, (w[:, None, None] * p[:, :, None] * q[:, None, :]))
+    cov = segment_sum(w[:, None, None] * p[:, :, None] * q[:, None, :], segment, num_segments)
     # SVD in float64: covariance of small objects (cm scale) is ~1e-4 and float32 loses the yaw.
     u, s, vh = torch.linalg.svd(cov.double())
     scale = s[:, :1].clamp_min(1e-30)
@@ -161,7 +164,6 @@ def kabsch(
     rot = (vh.transpose(-1, -2) @ corr @ u.transpose(-1, -2)).to(dt)
     trans = c_tgt - (rot @ c_ref[:, :, None])[:, :, 0]
     fitted = (rot[segment] @ reference[:, :, None])[:, :, 0] + trans[segment]
-    sq = torch.zeros(num_segments, device=dev, dtype=dt).index_add_(
-        0, segment, w * ((fitted - target) ** 2).sum(-1))
+    sq = segment_sum(w * ((fitted - target) ** 2).sum(-1), segment, num_segments)
     residual = (sq / wsum).sqrt()
     return torch.cat((trans, matrix_to_quat(rot)), dim=-1), residual

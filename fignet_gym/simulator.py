@@ -17,7 +17,14 @@ import torch
 from torch import Tensor, nn
 
 from fignet_gym.collision import FaceContacts, find_face_contacts
-from fignet_gym.geometry import axis_angle_to_quat, kabsch, quat_mul, quat_normalize, quat_rotate
+from fignet_gym.geometry import (
+    axis_angle_to_quat,
+    kabsch,
+    quat_mul,
+    quat_normalize,
+    quat_rotate,
+    segment_sum,
+)
 from fignet_gym.graph import Graph, build_graph, feature_sizes
 from fignet_gym.networks import EncodeProcessDecode
 from fignet_gym.normalization import Normalizer
@@ -301,9 +308,8 @@ class LearnedSimulator(nn.Module):
     def _object_radius(self, scene: Scene) -> Tensor:
         """RMS distance ``float[O]`` of each object's nodes from its centre of mass."""
         d2 = ((scene.ref_vertices - scene.object_com[scene.node_object]) ** 2).sum(-1)
-        s = torch.zeros(scene.num_objects, device=d2.device).index_add_(0, scene.node_object, d2)
-        n = torch.zeros(scene.num_objects, device=d2.device).index_add_(
-            0, scene.node_object, torch.ones_like(d2))
+        s = segment_sum(d2, scene.node_object, scene.num_objects)
+        n = segment_sum(torch.ones_like(d2), scene.node_object, scene.num_objects)
         return (s / n.clamp_min(1)).sqrt().clamp_min(1e-4)
 
     def loss(self, graph: Graph, target: Tensor, weight: Tensor, accumulate: bool = True

@@ -28,7 +28,7 @@ import torch
 from torch import Tensor
 
 from fignet_gym.data.format import Trajectory, load_trajectories
-from fignet_gym.geometry import quat_mul
+from fignet_gym.geometry import quat_mul, segment_sum
 from fignet_gym.scene import Scene
 from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
 
@@ -189,14 +189,13 @@ def rigid_terms(scene: Scene, pos: Tensor, acc: Tensor) -> tuple[Tensor, Tensor]
     plain per-node MSE lets translation and noise drown (the yaw of a pushed object).
     Returns ``(float[O, 3], float[O, 3])``.
     """
-    o = scene.num_objects
-    seg = scene.node_object
-    count = acc.new_zeros(o).index_add_(0, seg, torch.ones_like(acc[:, 0])).clamp_min(1)
-    centroid = acc.new_zeros(o, 3).index_add_(0, seg, pos) / count[:, None]
+    o, seg = scene.num_objects, scene.node_object
+    count = segment_sum(torch.ones_like(acc[:, 0]), seg, o).clamp_min(1)
+    centroid = segment_sum(pos, seg, o) / count[:, None]
     r = pos - centroid[seg]
-    lin = acc.new_zeros(o, 3).index_add_(0, seg, acc) / count[:, None]
-    r2 = acc.new_zeros(o).index_add_(0, seg, (r * r).sum(-1)).clamp_min(1e-12)
-    torque = acc.new_zeros(o, 3).index_add_(0, seg, torch.cross(r, acc, dim=-1))
+    lin = segment_sum(acc, seg, o) / count[:, None]
+    r2 = segment_sum((r * r).sum(-1), seg, o).clamp_min(1e-12)
+    torque = segment_sum(torch.cross(r, acc, dim=-1), seg, o)
     return lin, torque / r2[:, None] * (r2 / count).sqrt()[:, None]
 
 
