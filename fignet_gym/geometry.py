@@ -93,9 +93,13 @@ def transform_points(pose: Tensor, points: Tensor) -> Tensor:
 
 
 def quat_angle(a: Tensor, b: Tensor) -> Tensor:
-    """Geodesic angle (radians, in [0, pi]) between rotations. ``float[..., 4] x2 -> float[...]``."""
-    dot = (a * b).sum(-1).abs().clamp(max=1.0)
-    return 2.0 * torch.acos(dot)
+    """Geodesic angle (radians, in [0, pi]) between rotations. ``float[..., 4] x2 -> float[...]``.
+
+    ``2 atan2(|vec(conj(a) b)|, |w(conj(a) b)|)``, not ``2 acos(|<a, b>|)``: in float32 the arccos
+    form cannot resolve angles below ~1e-3 rad, which one step of a slowly pushed object is.
+    """
+    rel = quat_mul(quat_conj(a), b)
+    return 2.0 * torch.atan2(rel[..., 1:].norm(dim=-1), rel[..., 0].abs())
 
 
 def axis_angle_to_quat(axis_angle: Tensor) -> Tensor:

@@ -168,10 +168,10 @@ class ProcessorBlock(nn.Module):
     """One round of typed message passing with residual connections (paper App. C.1.2)."""
 
     def __init__(self, latent: int, hidden: int, mesh_edges: bool, object_nodes: bool,
-                 face_edges: bool, node_edges: bool) -> None:
+                 face_edges: bool, node_edges: bool, final: bool = False) -> None:
         super().__init__()
         L = latent
-        self.use_mesh, self.use_obj = mesh_edges, object_nodes
+        self.use_mesh, self.use_obj, self.final = mesh_edges, object_nodes, final
         self.use_face, self.use_world = face_edges, node_edges
         n_in = L
         if mesh_edges:
@@ -179,8 +179,9 @@ class ProcessorBlock(nn.Module):
             n_in += L
         if object_nodes:
             self.obj_mesh = MLP(3 * L, hidden, L)
-            self.mesh_obj = MLP(3 * L, hidden, L)
-            self.obj_node = MLP(2 * L, hidden, L)
+            if not final:  # the last block's object nodes would never reach the decoder
+                self.mesh_obj = MLP(3 * L, hidden, L)
+                self.obj_node = MLP(2 * L, hidden, L)
             n_in += L
         if face_edges:
             # All nine input latents [q_j, v_sj, v_rj]_{j=1..3} feed all three outputs (eq. 4).
@@ -212,17 +213,16 @@ class ProcessorBlock(nn.Module):
         return [torch.addmm(pre, e, m.first.weight[:, :L].T)
                 for pre, (m, e, _, _) in zip(nodes.chunk(len(parts), dim=1), parts, strict=True)]
 
-    def forward(self, t: Topology, v: Tensor, o: Tensor, e: dict[str, Tensor], final: bool = False
+    def forward(self, t: Topology, v: Tensor, o: Tensor, e: dict[str, Tensor]
                 ) -> tuple[Tensor, Tensor, dict[str, Tensor]]:
         """Update latents: ``v float[N, L]`` mesh nodes, ``o float[O, L]`` object nodes, ``e`` edge
         latents by type (``float[E, L]``; faces ``float[C, 3, L]``).
 
-        ``final``: only the new ``v`` is used (the decoder reads mesh nodes only), so edge latents
-        are not updated (an empty dict is returned), nor are object nodes (``o`` is returned),
-        which also skips the mesh->object messages. Those weights of the last block never affect
-        the output, in training either.
+        In the ``final`` block only the new ``v`` is used (the decoder reads mesh nodes only), so
+        edge latents are not updated (an empty dict is returned), nor are object nodes (``o`` is
+        returned), which also skips the mesh->object messages; that block has no weights for them.
         """
-        n = t.num_nodes
+        n, final = t.num_nodes, self.final
         new_e: dict[str, Tensor] = {}
         agg = [v]
         if self.use_mesh:
@@ -284,8 +284,9 @@ class EncodeProcessDecode(nn.Module):
             self.enc["world"] = MLP(feature_sizes["world"], hidden, L)
         self.object_nodes = object_nodes
         self.blocks = nn.ModuleList(
-            ProcessorBlock(L, hidden, mesh_edges, object_nodes, face_edges, node_edges)
-            for _ in range(steps))
+            ProcessorBlock(L, hidden, mesh_edges, object_nodes, face_edges, node_edges,
+                           final=i == steps - 1)
+            for i in range(steps))
         self.decoder = MLP(L, hidden, out_size, layer_norm=False)
 
     def forward(self, g: Graph) -> Tensor:
@@ -297,7 +298,6 @@ class EncodeProcessDecode(nn.Module):
             out = mlp(g.edge_features(name))
             e[name] = out.view(-1, 3, self.latent) if name == "face" else out
         topology = Topology.of(g)
-        last = len(self.blocks) - 1
-        for i, block in enumerate(self.blocks):
-            v, o, e = block(topology, v, o, e, final=i == last)
+        for block in self.blocks:
+            v, o, e = block(topology, v, o, e)
         return self.decoder(v)

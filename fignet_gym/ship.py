@@ -11,10 +11,11 @@ import json
 from pathlib import Path
 from typing import Any
 
-from fignet_gym.data.format import load_trajectories
+from fignet_gym.data.format import build_scene, load_trajectories
 from fignet_gym.evaluation import rollout_metrics
 from fignet_gym.pretrained_models import pretrained_dir
 from fignet_gym.simulator import LearnedSimulator
+from fignet_gym.training import auto_noise_std
 
 
 def ship(run: str, name: str, data: str, horizon: int, num: int = 64, dest: str | None = None,
@@ -25,6 +26,8 @@ def ship(run: str, name: str, data: str, horizon: int, num: int = 64, dest: str 
     state = _train_state(run_dir)
     trajs = load_trajectories(data)[:num]
     metrics = rollout_metrics(sim, trajs, horizon=horizon)
+    scenes = [build_scene(t, sim.config.mesh_options) for t in trajs]
+    metrics["median_node_acceleration"] = auto_noise_std(trajs, scenes, 1.0)
     out = Path(dest) if dest else pretrained_dir()
     out.mkdir(parents=True, exist_ok=True)
     card_meta = {"run": str(run_dir), "validation_at_export": meta.get("valid", {}),
@@ -72,8 +75,10 @@ Mesh options: {c.mesh_options}.
   machine (one core per run).
 - Recipe: per-node acceleration MSE in normalised space (vertical weight {c.vertical_weight}), plus a
   per-object linear/rotational acceleration term (weight {tr.get("rigid_loss_weight")}); rigid random-walk
-  input noise std {c.noise_std:.3g} m ({tr.get("noise_fraction")} x the median per-step
-  acceleration); random rotations about z; Adam, lr {tr.get("lr")} decaying to {tr.get("lr_final")}.
+  input noise std {c.noise_std:.3g} m ({c.noise_std / m["median_node_acceleration"]:.2g} x the median
+  per-step acceleration of moving nodes, {m["median_node_acceleration"]:.2g} m); pushforward
+  unrolls of up to {tr.get("unroll_steps", 0)} steps; random rotations about z; Adam, lr {tr.get("lr")}
+  decaying to {tr.get("lr_final")}.
 {notes}
 ## Scores on held-out data (`{data}`, {m["trajectories"]} trajectories)
 Rollouts from the first {c.history + 1} true poses; errors after {m["horizon_step"]} steps
@@ -87,6 +92,10 @@ Rollouts from the first {c.history + 1} true poses; errors after {m["horizon_ste
 
 Ratio to no motion: translation {m["translation_rmse_ratio_still"]:.1%}, rotation
 {m["rotation_deg_ratio_still"]:.1%}.
+Teacher-forced one-step error (summed over steps, divided by the motion over each step; the
+constant-velocity model's in brackets): translation {m["one_step_translation"]:.3f}
+({m["one_step_constvel_translation"]:.3f}), rotation {m["one_step_rotation"]:.3f}
+({m["one_step_constvel_rotation"]:.3f}).
 Collision edges per scene-step: {m["collision_edges_per_step"]:.1f}.
 Floor penetration ratio (predicted / MuJoCo): {m["penetration_ratio"]:.2f}.
 """

@@ -253,14 +253,16 @@ class LearnedSimulator(nn.Module):
         return torch.stack(out)
 
     # ------------------------------------------------------------------ training
-    def training_example(self, scene: Scene, poses: Tensor, generator: torch.Generator | None = None
-                         ) -> tuple[Graph, Tensor, Tensor]:
+    def training_example(self, scene: Scene, poses: Tensor, generator: torch.Generator | None = None,
+                         inputs: Tensor | None = None) -> tuple[Graph, Tensor, Tensor]:
         """Noisy inputs and the acceleration target for one-step supervision.
 
         Args:
             scene: topology.
             poses: ``float[H + 1, O, 7]`` true poses; the last row is the target step.
             generator: random source for the training noise.
+            inputs: ``float[H, O, 7]`` perturbed history to use instead of adding noise to
+                ``poses[:-1]`` (the model's own rollout, for pushforward training).
 
         Returns:
             ``(graph, target float[N, 3], node_weight float[N])``: raw features, the acceleration
@@ -269,7 +271,12 @@ class LearnedSimulator(nn.Module):
             non-dynamic nodes).
         """
         hist, nxt = poses[:-1], poses[-1]
-        noisy = self._pose_noise(scene, hist, generator) if self.config.noise_std > 0 else hist
+        if inputs is not None:
+            noisy = inputs
+        elif self.config.noise_std > 0:
+            noisy = self.pose_noise(scene, hist, generator)
+        else:
+            noisy = hist
         inputs = self.build_inputs(scene, noisy, nxt)
         x_true_t = scene.node_positions(hist[-1])
         noise_last = inputs.node_hist[-1] - x_true_t
@@ -280,7 +287,7 @@ class LearnedSimulator(nn.Module):
         weight = scene.dynamic_mask[scene.node_object].to(target.dtype)
         return inputs.graph, target, weight
 
-    def _pose_noise(self, scene: Scene, hist: Tensor, gen: torch.Generator | None) -> Tensor:
+    def pose_noise(self, scene: Scene, hist: Tensor, gen: torch.Generator | None) -> Tensor:
         """Rigid random-walk noise on dynamic objects' poses: ``float[H, O, 7] -> float[H, O, 7]``.
 
         Noise is rigid (a translation and a rotation about the centre of mass per object and frame)
@@ -358,11 +365,19 @@ class LearnedSimulator(nn.Module):
         config = SimulatorConfig.from_dict(blob["config"])
         sim = LearnedSimulator(config)
         try:
-            sim.load_state_dict(blob["state_dict"])
+            sim.load_state_dict(sim.upgrade_state_dict(blob["state_dict"]))
         except RuntimeError as exc:
             raise CheckpointError(f"{path}: weights do not match its config ({exc})") from exc
         sim.to(map_location).eval()
         return sim, dict(blob.get("meta", {}))
+
+    def upgrade_state_dict(self, state: dict[str, Tensor]) -> dict[str, Tensor]:
+        """``state`` without the last processor block's object-update weights, which checkpoints
+        written before that block lost them still carry (they never affected the output)."""
+        last = f"net.blocks.{len(self.net.blocks) - 1}."
+        stale = (last + "mesh_obj.", last + "obj_node.")
+        own = self.state_dict()
+        return {k: v for k, v in state.items() if k in own or not k.startswith(stale)}
 
     def with_config(self, **changes: Any) -> SimulatorConfig:
         """A copy of this simulator's config with some fields changed."""

@@ -211,3 +211,29 @@ def test_clip_length_hand_case() -> None:
     out = clip_length(d, 1.0)
     assert torch.allclose(out, torch.tensor([[0.6, 0.8, 0.0], [0.3, 0.4, 0.0], [0.0, 0.0, 0.0]]))
     assert torch.equal(clip_length(d, 0.0), d)
+
+
+def test_last_block_has_no_dead_weights_and_old_checkpoints_load(tmp_path, push_like_xml: str) -> None:
+    sim = LearnedSimulator(SMALL).eval()
+    randomize_normalizers(sim, push_like_xml)
+    last = len(sim.net.blocks) - 1
+    assert not hasattr(sim.net.blocks[last], "mesh_obj") and hasattr(sim.net.blocks[0], "mesh_obj")
+    # Every weight now gets a gradient: none is dead.
+    scene, hist = scene_and_history(push_like_xml)
+    sim.net(sim.normalize(sim.build_inputs(scene, hist, hist[-1]).graph)).sum().backward()
+    assert all(p.grad is not None for p in sim.net.parameters())
+    # A checkpoint of the older layout, which still carried those weights, loads to the same model.
+    old = tmp_path / "old.pt"
+    sim.save(old)
+    blob = torch.load(old, weights_only=True)
+    first = f"net.blocks.{last - 1}."
+    for key in [k for k in blob["state_dict"] if k.startswith((first + "mesh_obj.", first + "obj_node."))]:
+        blob["state_dict"][key.replace(first, f"net.blocks.{last}.")] = blob["state_dict"][key].clone()
+    torch.save(blob, old)
+    loaded = LearnedSimulator.load(old)
+    assert torch.equal(sim.step(scene, hist, hist[-1]), loaded.step(scene, hist, hist[-1]))
+    # Other unexpected weights still mean a mismatched file.
+    blob["state_dict"]["net.extra.weight"] = torch.zeros(2)
+    torch.save(blob, old)
+    with pytest.raises(CheckpointError, match="do not match"):
+        LearnedSimulator.load(old)

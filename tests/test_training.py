@@ -73,3 +73,52 @@ def test_unknown_training_keys_are_rejected() -> None:
     with pytest.raises(ValueError, match="unknown training config keys"):
         TrainConfig.from_dict({"stepz": 3})
     assert np.isfinite(TrainConfig().lr)
+
+
+def test_pushforward_feeds_the_models_own_rollout(push_file: Path, tmp_path: Path) -> None:
+    trajs = load_trajectories(push_file)
+    sim_cfg, cfg = load_run_config("push-cpu", {**TINY, "training.unroll_steps": 3,
+                                                "training.noise_fraction": 0.0})
+    trainer = Trainer(sim_cfg, cfg, trajs[:2], trajs[2:], tmp_path / "pf")
+    with torch.no_grad():
+        for p in trainer.sim.net.parameters():  # zero network: every object keeps its velocity
+            p.zero_()
+    H = trainer.sim.config.history + 1
+    scene, window = trainer.batch()
+    assert window.shape[0] == H + 1 + 3
+    dyn = scene.dynamic_mask
+    for k in range(4):
+        poses, hist = trainer.pushforward(scene, window, k)
+        assert torch.equal(poses, window[-(H + 1):])  # always supervised on the window's last step
+        if k == 0:
+            assert hist is None
+            continue
+        # Kinematic and static objects follow their true poses; a zero network extrapolates the
+        # dynamic objects' centres of mass linearly from the window's start.
+        assert torch.equal(hist[:, ~dyn], window[3:3 + H][:, ~dyn])
+        start = scene.com_positions(window[3 - k:3 - k + H])
+        expect = start[-1] + k * (start[-1] - start[-2])
+        assert torch.allclose(scene.com_positions(hist[-1])[dyn], expect[dyn], atol=2e-5)
+    draws = {trainer.pushforward(scene, window)[1] is None for _ in range(30)}
+    assert draws == {True, False}
+    assert torch.isfinite(trainer.loss(scene, window))
+
+
+def test_sampler_weights_approach_windows_above_other_still_windows(push_file: Path) -> None:
+    from fignet_gym.data.format import build_scene
+    from fignet_gym.training import WindowSampler
+
+    traj = load_trajectories(push_file)[0]
+    scene = build_scene(traj)
+    dyn = scene.dynamic_mask.numpy()
+    # First pose at which a dynamic object has moved (the pusher reaches it).
+    onset = int(np.argmax(np.abs(traj.poses[:, dyn, :3] - traj.poses[0, dyn, :3]).max(axis=(1, 2)) > 1e-6))
+    assert onset > 8, "fixture push must start with an approach"
+    sampler = WindowSampler([traj], [scene], history=2, still_weight=0.1, seed=0, lookahead=3,
+                            approach_weight=5.0)
+    w = sampler.prob / sampler.prob[0]  # window 0 is still and far from the onset
+    span = sampler.span  # a window t covers poses t .. t + span - 1
+    for t, wt in enumerate(w[:onset - span + 1]):
+        gap = onset - (t + span - 1)  # poses between the window's end and the onset
+        assert wt == pytest.approx(50.0 if gap <= 3 else 1.0), (t, gap)
+    assert (w[onset - span + 1:onset] > 10.0).all()  # moving windows: at least 1 / still_weight
