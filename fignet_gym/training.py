@@ -15,6 +15,7 @@ seen, errors) and TensorBoard logs. ``--resume`` continues exactly where a kille
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import signal
@@ -57,6 +58,9 @@ class TrainConfig:
             valid_horizon: the step at which errors are scored (``best.pt`` has the lowest sum of
             translation and rotation errors relative to the no-motion model there).
         checkpoint_every: steps between checkpoints of ``last.pt``.
+        ema_decay: validation, ``best.pt`` and shipping use an exponential moving average of the
+            weights with this decay (0: the raw weights), which smooths out the step-to-step jitter
+            of rollout errors that Adam's noise causes.
         threads: torch threads (0: leave torch's default).
         seed: random seed of sampling, noise and initialisation.
     """
@@ -76,6 +80,7 @@ class TrainConfig:
     valid_trajectories: int = 8
     valid_horizon: int = 50
     checkpoint_every: int = 250
+    ema_decay: float = 0.999
     threads: int = 0
     seed: int = 0
 
@@ -296,8 +301,11 @@ class Trainer:
             # Fine-tuning: weights and normaliser statistics from another run, this run's recipe.
             self.sim.load_state_dict(LearnedSimulator.load(init).state_dict())
             print(f"initialised from {init}")
+        self.ema = copy.deepcopy(self.sim).requires_grad_(False) if cfg.ema_decay > 0 else None
         if blob is not None:
             self.sim.load_state_dict(blob["state_dict"])
+            if self.ema is not None:
+                self.ema.load_state_dict(blob["meta"].get("ema", blob["state_dict"]))
             self.opt.load_state_dict(blob["meta"]["optimizer"])
             self.sched.load_state_dict(blob["meta"]["scheduler"])
             self.state = TrainState(**blob["meta"]["train_state"])
@@ -306,6 +314,8 @@ class Trainer:
                 self.gen.set_state(blob["meta"]["noise_rng"])
             print(f"resumed from {last} at step {self.state.step}")
         self._broadcast(self.sim.state_dict().values())
+        if self.ema is not None:
+            self._broadcast(self.ema.state_dict().values())
         if self.rank == 0:
             (out / "config.json").write_text(json.dumps(
                 {"simulator": config.to_dict(), "training": asdict(cfg), "processes": self.world},
@@ -433,6 +443,7 @@ class Trainer:
                 if self.world > 1 and self.sim.target_norm.calls < self.sim.target_norm.max_accumulations:
                     self._broadcast(b for name, b in self.sim.named_buffers())
                 self.sched.step()
+                self._update_ema()
                 st.step += 1
                 st.graphs_seen += self.cfg.batch_size * self.world
                 now, cnow = time.perf_counter(), time.process_time()
@@ -459,13 +470,29 @@ class Trainer:
                 signal.signal(s, h)
         return st
 
+    @torch.no_grad()
+    def _update_ema(self) -> None:
+        if self.ema is None:
+            return
+        # The usual warm-up: early on the average forgets fast, so it does not keep the init.
+        decay = min(self.cfg.ema_decay, (1 + self.state.step) / (10 + self.state.step))
+        for e, p in zip(self.ema.parameters(), self.sim.parameters(), strict=True):
+            e.lerp_(p, 1.0 - decay)
+        for e, b in zip(self.ema.buffers(), self.sim.buffers(), strict=True):
+            e.copy_(b)
+
+    @property
+    def model(self) -> LearnedSimulator:
+        """The weights that are validated and saved as ``best.pt``: the average, if kept."""
+        return self.ema if self.ema is not None else self.sim
+
     def validate(self, writer: Any | None = None) -> dict[str, float]:
         """Rollout errors on the first validation trajectories; keeps ``best.pt``."""
         from fignet_gym.evaluation import rollout_metrics
 
-        self.sim.eval()
+        self.model.eval()
         n = min(self.cfg.valid_trajectories, len(self.valid))
-        m = rollout_metrics(self.sim, self.valid[:n], self.valid_scenes[:n], horizon=self.cfg.valid_horizon)
+        m = rollout_metrics(self.model, self.valid[:n], self.valid_scenes[:n], horizon=self.cfg.valid_horizon)
         st = self.state
         rec = {"step": st.step, "graphs_seen": st.graphs_seen, "cpu_hours": st.cpu_seconds / 3600,
                **{k: float(v) for k, v in m.items() if isinstance(v, (int, float))}}
@@ -484,7 +511,7 @@ class Trainer:
                     writer.add_scalar(f"valid/{k}", v, st.step)
         if key < st.best_error:
             st.best_error = key
-            self.sim.save(self.out / "best.pt", meta={"valid": rec})
+            self.model.save(self.out / "best.pt", meta={"valid": rec})
         print(f"\nstep {st.step}: " + ", ".join(f"{k}={v:.4g}" for k, v in rec.items() if k != "step"))
         return rec
 
@@ -494,6 +521,8 @@ class Trainer:
                 "train_state": asdict(self.state),
                 "sampler_rng": json.dumps(self.sampler.rng.bit_generator.state),
                 "noise_rng": self.gen.get_state()}
+        if self.ema is not None:
+            meta["ema"] = self.ema.state_dict()
         self.sim.save(self.out / "last.pt", meta=meta)
 
 
