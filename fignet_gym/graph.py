@@ -100,24 +100,26 @@ def clip_length(d: Tensor, max_len: float) -> Tensor:
     return d * (max_len / n.clamp_min(max_len))
 
 
-def feature_sizes(history: int, num_props: int = 3) -> dict[str, int]:
+def feature_sizes(history: int, num_props: int = 3, next_separation: bool = False) -> dict[str, int]:
     """Input feature sizes of each graph element for ``history`` velocities."""
     node = 4 * history + num_props + 1 + 4
-    return {"node": node, "object": node, "mesh": 8, "obj_mesh": 8, "face": 4 * 7 + 6, "world": 4}
+    face = 4 * 7 + 6 + (4 if next_separation else 0)
+    return {"node": node, "object": node, "mesh": 8, "obj_mesh": 8, "face": face, "world": 4}
 
 
 def _node_features(pos_hist: Tensor, kin: Tensor, kin_disp: Tensor, props: Tensor) -> Tensor:
     """``[velocities (+norms), props, kinematic flag, next kinematic displacement (+norm)]``.
 
-    ``pos_hist float[H, X, 3]``, ``kin float[X]``, ``kin_disp float[X, 3]``, ``props float[X, P]``.
+    ``pos_hist float[H, X, 3]``, ``kin float[X]``, ``kin_disp float[X, 3]`` (zero for dynamic
+    points), ``props float[X, P]``.
     """
     vel = pos_hist[1:] - pos_hist[:-1]  # [H-1, X, 3], oldest first
     vel = vel.flip(0).permute(1, 0, 2).reshape(pos_hist.shape[1], -1)  # newest first
-    return torch.cat((with_norm(vel), props, kin[:, None], with_norm(kin_disp * kin[:, None])), dim=-1)
+    return torch.cat((with_norm(vel), props, kin[:, None], with_norm(kin_disp)), dim=-1)
 
 
-def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, clip: float = 0.0
-                       ) -> tuple[Tensor, Tensor, Tensor]:
+def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, clip: float = 0.0,
+                       kin_disp: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor]:
     """Face-face hyper-edge features (paper eq. 1) with each face's nodes sorted by distance.
 
     Args:
@@ -125,10 +127,16 @@ def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, clip:
         faces: ``int64[F, 3]``.
         contacts: ``C`` directed face pairs with closest points.
         clip: spanning vectors longer than this are shortened (:func:`clip_length`; 0: off).
+        kin_disp: ``float[N, 3]`` next-step displacement of kinematic nodes (0 for the others).
+            When given, ``[d_rs_next, |d_rs_next|]`` is appended: ``d_rs`` with the sender moved
+            by its face's mean next displacement, i.e. the separation a pusher will leave (or the
+            overlap it will make) if the receiver stays. The network could combine ``d_rs`` with
+            the nodes' displacement features itself, but a contact onset hinges on the sign of
+            this millimetre-scale difference, and one feature makes it explicit.
 
     Returns:
-        ``(senders int64[C, 3], receivers int64[C, 3], features float[C, 34])`` with features
-        ``[d_rs, |d_rs|, (d_sj, |d_sj|)_j, (d_rj, |d_rj|)_j, n_s, n_r]``.
+        ``(senders int64[C, 3], receivers int64[C, 3], features float[C, 34 or 38])`` with features
+        ``[d_rs, |d_rs|, (d_sj, |d_sj|)_j, (d_rj, |d_rj|)_j, n_s, n_r (, d_rs_next, |d_rs_next|)]``.
     """
     c = contacts.sender_face.shape[0]
     # Sender and receiver faces as one batch of 2C rows: [senders; receivers].
@@ -145,7 +153,11 @@ def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, clip:
     d_rs = contacts.receiver_point - contacts.sender_point
     # [d_rs, sender spans, receiver spans]: with_norm appends each 3-vector's norm in one pass.
     vecs = with_norm(torch.cat((d_rs, span[:c].reshape(c, 9), span[c:].reshape(c, 9)), dim=-1))
-    return nodes[:c], nodes[c:], torch.cat((vecs, n[:c], n[c:]), dim=-1)
+    out = [vecs, n[:c], n[c:]]
+    if kin_disp is not None:
+        shift = kin_disp.index_select(0, nodes[:c].reshape(-1)).view(c, 3, 3).mean(1)
+        out.append(with_norm(d_rs - shift))
+    return nodes[:c], nodes[c:], torch.cat(out, dim=-1)
 
 
 def _static_features(scene: Scene, clip: float) -> dict[str, Tensor]:
@@ -171,7 +183,8 @@ def _static_features(scene: Scene, clip: float) -> dict[str, Tensor]:
 
 def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Tensor,
                 com_next: Tensor, contacts: FaceContacts | None,
-                node_edges: tuple[Tensor, Tensor] | None = None, clip: float = 0.0) -> Graph:
+                node_edges: tuple[Tensor, Tensor] | None = None, clip: float = 0.0,
+                next_separation: bool = False) -> Graph:
     """Assemble all un-normalised input features.
 
     Args:
@@ -184,14 +197,16 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
         node_edges: optional MeshGraphNets-style node-node collision edges ``(senders, receivers)``.
         clip: length (m) above which face spanning vectors and object-mesh offsets are shortened
             (0: the paper's unclipped features).
+        next_separation: append the next-step separation to face features
+            (:func:`face_edge_features`).
     """
     static = _static_features(scene, clip)
     n = node_hist.shape[1]
     cur, cur_com = node_hist[-1], com_hist[-1]
     # Mesh and object nodes share one feature layout: one pass over the N + O points.
     hist = torch.cat((node_hist, com_hist), dim=1)
-    all_f = _node_features(hist, static["kin"], torch.cat((node_next, com_next)) - hist[-1],
-                           static["props"])
+    kin_disp = (torch.cat((node_next, com_next)) - hist[-1]) * static["kin"][:, None]
+    all_f = _node_features(hist, static["kin"], kin_disp, static["props"])
     node_f, obj_f = all_f[:n], all_f[n:]
 
     s, r = scene.mesh_edges
@@ -206,10 +221,11 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
 
     empty_i = torch.zeros(0, dtype=torch.long, device=cur.device)
     if contacts is not None:
-        fs, fr, ff = face_edge_features(cur, scene.faces, contacts, clip)
+        fs, fr, ff = face_edge_features(cur, scene.faces, contacts, clip,
+                                        kin_disp[:n] if next_separation else None)
     else:
         fs = fr = empty_i.reshape(0, 3)
-        ff = cur.new_zeros(0, feature_sizes(1)["face"])
+        ff = cur.new_zeros(0, feature_sizes(1, next_separation=next_separation)["face"])
     if node_edges is not None:
         ns, nr = node_edges
         nf = with_norm(cur[ns] - cur[nr])

@@ -78,7 +78,7 @@ Mesh options: {c.mesh_options}.
   input noise std {c.noise_std:.3g} m ({c.noise_std / m["median_node_acceleration"]:.2g} x the median
   per-step acceleration of moving nodes, {m["median_node_acceleration"]:.2g} m); pushforward
   unrolls of up to {tr.get("unroll_steps", 0)} steps; random rotations about z; Adam, lr {tr.get("lr")}
-  decaying to {tr.get("lr_final")}.
+  decaying to {tr.get("lr_final")}; weight average (EMA) decay {tr.get("ema_decay", 0)}.
 {notes}
 ## Scores on held-out data (`{data}`, {m["trajectories"]} trajectories)
 Rollouts from the first {c.history + 1} true poses; errors after {m["horizon_step"]} steps

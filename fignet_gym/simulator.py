@@ -65,6 +65,9 @@ class SimulatorConfig:
             residual ``a - g dt^2``, so free flight is exact from the start and the network's
             precision is spent on contacts (whose large accelerations set the target scale and so
             would otherwise limit how precisely it can output the small free-fall term).
+        next_separation: append to face-face features the separation a kinematic sender face
+            will leave after its known next displacement (see ``graph.face_edge_features``); not
+            in the paper, for contact onsets under a pusher.
         scene_type: what the model was trained on ("push", "toss", ...; "" = unspecified).
         mesh_options: how MuJoCo primitives are meshed for this model.
     """
@@ -83,6 +86,7 @@ class SimulatorConfig:
     noise_std: float = 0.0
     vertical_weight: float = 1.0
     gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    next_separation: bool = False
     scene_type: str = ""
     mesh_options: MeshOptions = field(default_factory=MeshOptions)
 
@@ -129,7 +133,7 @@ class LearnedSimulator(nn.Module):
         super().__init__()
         self.config = config or SimulatorConfig()
         c = self.config
-        sizes = feature_sizes(c.history)
+        sizes = feature_sizes(c.history, next_separation=c.next_separation)
         face, node = c.collision == "face", c.collision == "node"
         self.net = EncodeProcessDecode(
             sizes, latent=c.latent_size, hidden=c.hidden_size or c.latent_size,
@@ -160,7 +164,7 @@ class LearnedSimulator(nn.Module):
         node_hist, node_next, com_hist, com_next = nodes[:-1], nodes[-1], coms[:-1], coms[-1]
         contacts, node_edges = self.collide(scene, node_hist[-1])
         graph = build_graph(scene, node_hist, com_hist, node_next, com_next, contacts, node_edges,
-                            clip=self.config.feature_clip)
+                            clip=self.config.feature_clip, next_separation=self.config.next_separation)
         return StepInputs(graph, node_hist, node_next, contacts)
 
     def collide(self, scene: Scene, node_pos: Tensor

@@ -226,6 +226,29 @@ def rigid_terms(scene: Scene, pos: Tensor, acc: Tensor) -> tuple[Tensor, Tensor]
 
 
 # ----------------------------------------------------------------------------- trainer
+def warm_start(sim: LearnedSimulator, source: LearnedSimulator) -> None:
+    """Copy ``source``'s weights and normaliser statistics into ``sim``.
+
+    The architectures must match, except that ``sim`` may add the next-step separation to the
+    face features (``next_separation``): the face encoder's new input columns start at zero, so
+    the warm-started model computes exactly what ``source`` did, and the new features' normaliser
+    statistics start as those of ``d_rs``, whose scale they share.
+    """
+    own, src = sim.state_dict(), source.state_dict()
+    if set(own) != set(src):
+        raise ValueError(f"cannot warm-start: parameters differ ({sorted(set(own) ^ set(src))[:4]} ...)")
+    widen = {"net.enc.face.first.weight", "norms.face.total", "norms.face.total_sq"}
+    for key, value in src.items():
+        target = own[key]
+        if target.shape == value.shape:
+            target.copy_(value)
+        elif key in widen and target.shape == (*value.shape[:-1], value.shape[-1] + 4):
+            extra = value[..., :4] if key.startswith("norms") else torch.zeros_like(value[..., :4])
+            target.copy_(torch.cat((value, extra), -1))
+        else:
+            raise ValueError(f"cannot warm-start {key}: shape {tuple(value.shape)} -> {tuple(target.shape)}")
+
+
 @dataclass
 class TrainState:
     """Everything ``--resume`` needs besides model and optimiser weights."""
@@ -299,7 +322,7 @@ class Trainer:
         self.gen = torch.Generator(device=self.device).manual_seed(seed)
         if init is not None and blob is None:
             # Fine-tuning: weights and normaliser statistics from another run, this run's recipe.
-            self.sim.load_state_dict(LearnedSimulator.load(init).state_dict())
+            warm_start(self.sim, LearnedSimulator.load(init))
             print(f"initialised from {init}")
         self.ema = copy.deepcopy(self.sim).requires_grad_(False) if cfg.ema_decay > 0 else None
         if blob is not None:

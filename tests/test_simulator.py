@@ -65,6 +65,14 @@ def test_hand_computed_face_features() -> None:
         torch.tensor([0, 0, 1.0]), n_r.float(),
     ]).double()
     assert torch.allclose(f[0], expected, atol=1e-6)
+    # The sender (a kinematic pusher face) will rise by 0.04 and the receiver is 0.1 above it:
+    # the next-step separation is 0.06 (the receiver's nodes' displacements do not count).
+    kin_disp = torch.zeros_like(pos)
+    kin_disp[:3, 2] = 0.04
+    kin_disp[3:, 0] = 0.5
+    _, _, f_next = face_edge_features(pos, faces, c, kin_disp=kin_disp)
+    assert torch.allclose(f_next[0, :34], f[0]) and f_next.shape[1] == 38
+    assert torch.allclose(f_next[0, 34:], torch.tensor([0, 0, 0.06, 0.06], dtype=torch.float64))
 
 
 def test_translation_equivariance(push_like_xml: str) -> None:
@@ -237,3 +245,20 @@ def test_last_block_has_no_dead_weights_and_old_checkpoints_load(tmp_path, push_
     torch.save(blob, old)
     with pytest.raises(CheckpointError, match="do not match"):
         LearnedSimulator.load(old)
+
+
+def test_warm_start_onto_next_separation_features_keeps_the_function(push_like_xml: str) -> None:
+    from fignet_gym.training import warm_start
+
+    source = LearnedSimulator(SMALL).eval()
+    randomize_normalizers(source, push_like_xml)
+    wide = LearnedSimulator(replace(SMALL, next_separation=True)).eval()
+    warm_start(wide, source)
+    scene, hist = scene_and_history(push_like_xml)
+    nxt = hist[-1].clone()
+    nxt[2, 0] -= 0.01  # the tip moves on: the new features are non-zero
+    g = wide.build_inputs(scene, hist, nxt).graph
+    assert g.face_edges.features.shape[1] == 38 and g.face_edges.features[:, 34:].abs().sum() > 0
+    assert torch.allclose(wide.step(scene, hist, nxt), source.step(scene, hist, nxt), atol=1e-6)
+    with pytest.raises(ValueError, match="cannot warm-start"):
+        warm_start(LearnedSimulator(replace(SMALL, latent_size=8)), source)

@@ -47,7 +47,8 @@ def test_resume_after_interruption_continues_exactly(push_file: Path, tmp_path: 
     for (name, a), b in zip(straight.ema.state_dict().items(), resumed.ema.state_dict().values(),
                             strict=True):
         assert torch.equal(a, b), name
-    assert any(not torch.equal(a, b) for a, b in zip(straight.ema.parameters(), straight.sim.parameters()))
+    assert any(not torch.equal(a, b)
+               for a, b in zip(straight.ema.parameters(), straight.sim.parameters(), strict=True))
 
 
 def test_two_data_parallel_processes_stay_identical(push_file: Path, tmp_path: Path) -> None:
