@@ -262,3 +262,24 @@ def test_warm_start_onto_next_separation_features_keeps_the_function(push_like_x
     assert torch.allclose(wide.step(scene, hist, nxt), source.step(scene, hist, nxt), atol=1e-6)
     with pytest.raises(ValueError, match="cannot warm-start"):
         warm_start(LearnedSimulator(replace(SMALL, latent_size=8)), source)
+
+
+def test_rigid_training_noise_has_the_configured_scales(push_like_xml: str) -> None:
+    from fignet_gym.geometry import quat_conj, quat_mul, quat_to_axis_angle
+
+    scene, hist = scene_and_history(push_like_xml)
+    gen = torch.Generator().manual_seed(0)
+    for rot_std, expect_rot in ((0.0, None), (0.01, 0.01)):
+        sim = LearnedSimulator(replace(SMALL, noise_std=1e-3, rotation_noise_std=rot_std))
+        draws = torch.stack([sim.pose_noise(scene, hist, gen) for _ in range(1500)])  # [S, H, O, 7]
+        dyn = scene.dynamic_mask
+        assert torch.equal(draws[:, :, ~dyn], hist[None, :, ~dyn].expand_as(draws[:, :, ~dyn]))
+        assert torch.allclose(draws[:, 0], hist[0].expand_as(draws[:, 0]), atol=1e-6)  # walk starts at 0
+        last = draws[:, -1, dyn]
+        com_shift = scene.com_positions(draws[:, -1])[:, dyn] - scene.com_positions(hist[-1])[dyn]
+        assert com_shift.pow(2).mean().sqrt().item() == pytest.approx(1e-3, rel=0.06)
+        rotvec = quat_to_axis_angle(quat_mul(last[..., 3:], quat_conj(hist[-1, dyn, 3:])))
+        rot_rms = rotvec.pow(2).mean().sqrt().item()
+        if expect_rot is None:  # default: nodes at the RMS radius move by noise_std
+            expect_rot = 1e-3 / sim._object_radius(scene)[dyn].item()
+        assert rot_rms == pytest.approx(expect_rot, rel=0.06)
