@@ -45,9 +45,10 @@ class TrainConfig:
         noise_fraction: training noise std as a fraction of the median per-step acceleration of
             moving dynamic nodes in the training data (used when the model's ``noise_std`` is 0).
         still_weight: sampling weight of windows in which no dynamic object moves (moving: 1 to
-            11 by acceleration), unless motion starts within ``onset_lookahead`` poses after the
-            window: those (a pusher closing in, not yet touching) weigh ``approach_weight``, so
-            that the model learns when contact has not begun yet.
+            11 by acceleration), unless motion happens within ``near_motion_poses`` poses before or
+            after the window: those (a pusher closing in, not yet touching; an object that has
+            just stopped) weigh ``near_motion_weight``, so that the model learns when contact has
+            not begun yet and that an object once stopped stays put.
         rigid_loss_weight: weight of the per-object linear and angular acceleration loss terms.
         unroll_steps: pushforward training: each batch first rolls the model out for ``k`` steps
             (``k`` uniform in ``0..unroll_steps``, no gradient) from noisy inputs, then is
@@ -71,8 +72,8 @@ class TrainConfig:
     lr_final: float = 1e-4
     noise_fraction: float = 0.5
     still_weight: float = 0.1
-    onset_lookahead: int = 10
-    approach_weight: float = 3.0
+    near_motion_poses: int = 10
+    near_motion_weight: float = 3.0
     rigid_loss_weight: float = 1.0
     unroll_steps: int = 0
     rotate_z: bool = True
@@ -156,14 +157,15 @@ class WindowSampler:
     dynamic-node acceleration and ``a_ref`` the median over moving windows. Contact onsets (a pusher
     starting an object, an impact) are a few windows per trajectory but carry most of what a model
     must learn. A window in which no dynamic object moves weighs ``still_weight``, or
-    ``approach_weight`` if motion starts within ``lookahead`` poses after it: without those
+    ``near_weight`` if motion happens within ``near`` poses before or after it. Without the
     approach windows a model learns that a pusher within the collision radius always moves the
-    object, and starts it too early.
+    object, and starts it too early; without the settling windows, that a slowly sliding object
+    keeps sliding (a rollout's small excess velocity after a glancing push then never dies out).
     """
 
     def __init__(self, trajs: list[Trajectory], scenes: list[Scene], history: int,
                  still_weight: float, seed: int, accel_cap: float = 10.0, unroll: int = 0,
-                 lookahead: int = 0, approach_weight: float = 1.0) -> None:
+                 near: int = 0, near_weight: float = 1.0) -> None:
         self.trajs, self.scenes, self.span = trajs, scenes, history + 2 + unroll
         index, weight, accel = [], [], []
         for i, (traj, scene) in enumerate(zip(trajs, scenes, strict=True)):
@@ -179,7 +181,8 @@ class WindowSampler:
                 if moved[t:end].any():
                     weight.append(-1.0)
                 else:
-                    weight.append(approach_weight if moved[end:end + lookahead].any() else still_weight)
+                    close = moved[end:end + near].any() or moved[max(t - near, 0):t].any()
+                    weight.append(near_weight if close else still_weight)
         if not index:
             raise ValueError(f"no trajectory has the {self.span} poses a training window needs")
         self.index = np.asarray(index)
@@ -317,8 +320,8 @@ class Trainer:
         # Each process draws different windows and noise.
         seed = cfg.seed + 1000 * self.rank
         self.sampler = WindowSampler(train, self.train_scenes, config.history, cfg.still_weight, seed,
-                                     unroll=cfg.unroll_steps, lookahead=cfg.onset_lookahead,
-                                     approach_weight=cfg.approach_weight)
+                                     unroll=cfg.unroll_steps, near=cfg.near_motion_poses,
+                                     near_weight=cfg.near_motion_weight)
         self.gen = torch.Generator(device=self.device).manual_seed(seed)
         if init is not None and blob is None:
             # Fine-tuning: weights and normaliser statistics from another run, this run's recipe.

@@ -110,21 +110,24 @@ def test_pushforward_feeds_the_models_own_rollout(push_file: Path, tmp_path: Pat
     assert torch.isfinite(trainer.loss(scene, window))
 
 
-def test_sampler_weights_approach_windows_above_other_still_windows(push_file: Path) -> None:
+def test_sampler_weights_still_windows_near_motion_above_other_still_windows(push_file: Path) -> None:
     from fignet_gym.data.format import build_scene
     from fignet_gym.training import WindowSampler
 
     traj = load_trajectories(push_file)[0]
     scene = build_scene(traj)
     dyn = scene.dynamic_mask.numpy()
-    # First pose at which a dynamic object has moved (the pusher reaches it).
-    onset = int(np.argmax(np.abs(traj.poses[:, dyn, :3] - traj.poses[0, dyn, :3]).max(axis=(1, 2)) > 1e-6))
-    assert onset > 8, "fixture push must start with an approach"
-    sampler = WindowSampler([traj], [scene], history=2, still_weight=0.1, seed=0, lookahead=3,
-                            approach_weight=5.0)
-    w = sampler.prob / sampler.prob[0]  # window 0 is still and far from the onset
-    span = sampler.span  # a window t covers poses t .. t + span - 1
-    for t, wt in enumerate(w[:onset - span + 1]):
-        gap = onset - (t + span - 1)  # poses between the window's end and the onset
-        assert wt == pytest.approx(50.0 if gap <= 3 else 1.0), (t, gap)
-    assert (w[onset - span + 1:onset] > 10.0).all()  # moving windows: at least 1 / still_weight
+    moved = np.abs(np.diff(traj.poses[:, dyn, :3], axis=0)).max(axis=(1, 2)) > 1e-6  # step i: pose i -> i+1
+    first, last = int(np.argmax(moved)), int(len(moved) - 1 - np.argmax(moved[::-1]))
+    sampler = WindowSampler([traj], [scene], history=2, still_weight=0.1, seed=0, near=3, near_weight=5.0)
+    span = sampler.span  # window t covers poses t .. t + span - 1, i.e. steps t .. t + span - 2
+    assert first > span + 4 and last < len(moved) - 5, "fixture push must start and end at rest"
+    w = sampler.prob / sampler.prob[0]  # window 0 is still and far from any motion
+    for t, wt in enumerate(w):
+        steps = range(t, t + span - 1)
+        if any(moved[i] for i in steps):
+            assert wt > 10.0, t  # moving windows: at least 1 / still_weight
+        elif first - (t + span - 2) <= 3 and first > t or 0 < t - last <= 3:
+            assert wt == pytest.approx(50.0), t  # approach or just stopped
+        else:
+            assert wt == pytest.approx(1.0), t
