@@ -329,10 +329,14 @@ class Trainer:
             print(f"initialised from {init}")
         self.ema = copy.deepcopy(self.sim).requires_grad_(False) if cfg.ema_decay > 0 else None
         if blob is not None:
-            self.sim.load_state_dict(blob["state_dict"])
+            self.sim.load_state_dict(self.sim.upgrade_state_dict(blob["state_dict"]))
             if self.ema is not None:
-                self.ema.load_state_dict(blob["meta"].get("ema", blob["state_dict"]))
-            self.opt.load_state_dict(blob["meta"]["optimizer"])
+                self.ema.load_state_dict(self.sim.upgrade_state_dict(blob["meta"].get("ema", blob["state_dict"])))
+            try:
+                self.opt.load_state_dict(blob["meta"]["optimizer"])
+            except ValueError as exc:
+                raise ValueError(f"{last}: optimiser state from an older layout; start a new run with "
+                                 f"--init {last} instead of --resume ({exc})") from exc
             self.sched.load_state_dict(blob["meta"]["scheduler"])
             self.state = TrainState(**blob["meta"]["train_state"])
             if self.rank == 0:  # other processes continue with fresh draws
