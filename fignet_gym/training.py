@@ -331,7 +331,8 @@ class Trainer:
         if blob is not None:
             self.sim.load_state_dict(self.sim.upgrade_state_dict(blob["state_dict"]))
             if self.ema is not None:
-                self.ema.load_state_dict(self.sim.upgrade_state_dict(blob["meta"].get("ema", blob["state_dict"])))
+                ema = blob["meta"].get("ema", blob["state_dict"])
+                self.ema.load_state_dict(self.sim.upgrade_state_dict(ema))
             try:
                 self.opt.load_state_dict(blob["meta"]["optimizer"])
             except ValueError as exc:
