@@ -76,9 +76,10 @@ Mesh options: {c.mesh_options}.
 - Recipe: per-node acceleration MSE in normalised space (vertical weight {c.vertical_weight}), plus a
   per-object linear/rotational acceleration term (weight {tr.get("rigid_loss_weight")}); rigid random-walk
   input noise std {c.noise_std:.3g} m ({c.noise_std / m["median_node_acceleration"]:.2g} x the median
-  per-step acceleration of moving nodes, {m["median_node_acceleration"]:.2g} m); pushforward
-  unrolls of up to {tr.get("unroll_steps", 0)} steps; random rotations about z; Adam, lr {tr.get("lr")}
-  decaying to {tr.get("lr_final")}; weight average (EMA) decay {tr.get("ema_decay", 0)}.
+  per-step acceleration of moving nodes in the held-out data, {m["median_node_acceleration"]:.2g} m);
+  rotational noise std {c.rotation_noise_std or "(from the position noise)"} rad; pushforward unrolls
+  of up to {tr.get("unroll_steps", 0)} steps; random rotations about z; Adam, lr {tr.get("lr")} decaying
+  to {tr.get("lr_final")}; weight average (EMA) decay {tr.get("ema_decay", 0)}.
 {notes}
 ## Scores on held-out data (`{data}`, {m["trajectories"]} trajectories)
 Rollouts from the first {c.history + 1} true poses; errors after {m["horizon_step"]} steps
