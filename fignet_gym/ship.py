@@ -23,7 +23,7 @@ def ship(run: str, name: str, data: str, horizon: int, num: int = 64, dest: str 
     """Export ``run/best.pt`` as ``<dest>/<name>.pt`` and write its model card; returns the metrics."""
     run_dir = Path(run)
     sim, meta = LearnedSimulator.load_with_meta(run_dir / "best.pt")
-    state = _train_state(run_dir)
+    state = _train_state(run_dir, meta.get("valid", {}))
     trajs = load_trajectories(data)[:num]
     metrics = rollout_metrics(sim, trajs, horizon=horizon)
     scenes = [build_scene(t, sim.config.mesh_options) for t in trajs]
@@ -39,16 +39,13 @@ def ship(run: str, name: str, data: str, horizon: int, num: int = 64, dest: str 
     return metrics
 
 
-def _train_state(run_dir: Path) -> dict[str, Any]:
-    """Steps, graphs and CPU hours of a run (from the last validation record of its curve)."""
-    curve = run_dir / "curve.jsonl"
-    if not curve.is_file():
-        return {}
-    lines = [json.loads(line) for line in curve.read_text().splitlines() if line.strip()]
-    cfg = json.loads((run_dir / "config.json").read_text())
-    last = lines[-1] if lines else {}
-    return {"steps": last.get("step"), "graphs_seen": last.get("graphs_seen"),
-            "cpu_hours": last.get("cpu_hours"), "training": cfg.get("training", {})}
+def _train_state(run_dir: Path, valid: dict[str, Any]) -> dict[str, Any]:
+    """Steps, graphs and CPU hours that produced the exported checkpoint (its validation record),
+    and the run's training settings."""
+    cfg_path = run_dir / "config.json"
+    cfg = json.loads(cfg_path.read_text()) if cfg_path.is_file() else {}
+    return {"steps": valid.get("step"), "graphs_seen": valid.get("graphs_seen"),
+            "cpu_hours": valid.get("cpu_hours"), "training": cfg.get("training", {})}
 
 
 def model_card(name: str, sim: LearnedSimulator, state: dict[str, Any], m: dict[str, Any],
