@@ -2,12 +2,13 @@
 
 import math
 
+import numpy as np
 import pytest
 import torch
 
 from fignet_gym.data.format import build_scene
 from fignet_gym.data.generate import iter_trajectories
-from fignet_gym.evaluation import one_step_errors, rollout_metrics
+from fignet_gym.evaluation import median_ratio_interval, one_step_errors, rollout_metrics
 from fignet_gym.scene import Scene
 from tests.sim_factories import zero_simulator
 
@@ -38,3 +39,15 @@ def test_rollout_metrics_of_a_model_that_never_moves_is_the_no_motion_reference(
     # Shape matching in float32 leaves ~1e-3 deg of jitter.
     assert m["rotation_deg_final"] == pytest.approx(m["still_rotation_deg_final"], abs=0.01)
     assert math.isfinite(m["penetration_m"])
+
+
+def test_median_ratio_interval_brackets_known_ratios() -> None:
+    ref = np.random.default_rng(1).uniform(0.5, 2.0, 80)
+    # A model at exactly half the reference's error on every trajectory: the ratio is 0.5 in every
+    # resample, so the interval collapses onto it.
+    assert median_ratio_interval(0.5 * ref, ref) == pytest.approx([0.5, 0.5])
+    # Independent errors of equal distribution: the interval is wide and contains 1.
+    other = np.random.default_rng(2).uniform(0.5, 2.0, 80)
+    lo, hi = median_ratio_interval(other, ref)
+    assert lo < 1.0 < hi and hi - lo > 0.1
+    assert all(math.isnan(x) for x in median_ratio_interval(np.zeros(0), np.zeros(0)))
