@@ -324,7 +324,8 @@ class LearnedSimulator(nn.Module):
         q_new = quat_normalize(quat_mul(dq, hist[..., 3:]))
         # Rotate about the centre of mass: com stays, body origin moves with the rotation.
         p_new = com + quat_rotate(dq, hist[..., :3] - com) + trans
-        return torch.cat((p_new, q_new), dim=-1)
+        # Static and kinematic objects keep their exact poses (the identity rotation above rounds).
+        return torch.where(scene.dynamic_mask[None, :, None], torch.cat((p_new, q_new), dim=-1), hist)
 
     def _object_radius(self, scene: Scene) -> Tensor:
         """RMS distance ``float[O]`` of each object's nodes from its centre of mass."""

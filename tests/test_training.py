@@ -15,7 +15,7 @@ from fignet_gym.training import TrainConfig, Trainer, load_run_config, rotate_ab
 
 TINY = {"simulator.latent_size": 8, "simulator.message_passing_steps": 1,
         "training.batch_size": 2, "training.steps": 6, "training.valid_every": 100,
-        "training.valid_trajectories": 1, "training.threads": 1}
+        "training.valid_trajectories": 1, "training.threads": 1, "training.unroll_steps": 2}
 
 
 @pytest.fixture(scope="module")
@@ -84,7 +84,7 @@ def test_unknown_training_keys_are_rejected() -> None:
 def test_pushforward_feeds_the_models_own_rollout(push_file: Path, tmp_path: Path) -> None:
     trajs = load_trajectories(push_file)
     sim_cfg, cfg = load_run_config("push-cpu", {**TINY, "training.unroll_steps": 3,
-                                                "training.noise_fraction": 0.0})
+                                                "simulator.noise_std": 0.0, "training.noise_fraction": 0.0})
     trainer = Trainer(sim_cfg, cfg, trajs[:2], trajs[2:], tmp_path / "pf")
     with torch.no_grad():
         for p in trainer.sim.net.parameters():  # zero network: every object keeps its velocity
