@@ -9,7 +9,7 @@ and writes checkpoints. The model runs on CUDA when available.
 
 A run directory holds ``config.json``, ``last.pt`` (model + optimiser + sampler state, written
 atomically every ``checkpoint_every`` steps and on interruption), ``best.pt`` (lowest validation
-rollout error), ``curve.jsonl`` (one JSON line per validation: step, wall-clock CPU hours, graphs
+rollout error), ``curve.jsonl`` (one JSON line per validation: step, CPU hours summed over processes, graphs
 seen, errors) and TensorBoard logs. ``--resume`` continues exactly where a killed run stopped.
 """
 
@@ -482,7 +482,8 @@ class Trainer:
                 st.step += 1
                 st.graphs_seen += self.cfg.batch_size * self.world
                 now, cnow = time.perf_counter(), time.process_time()
-                st.cpu_seconds += cnow - c_last
+                # Every process does the same work, so the run's CPU time is world x this one's.
+                st.cpu_seconds += (cnow - c_last) * self.world
                 gps = self.cfg.batch_size * self.world / max(now - t_last, 1e-9)
                 t_last, c_last = now, cnow
                 bar.update(1)
