@@ -19,6 +19,17 @@ def test_shipped_models_load_offline_with_model_cards() -> None:
         assert f'load_pretrained("{name}")' in card and "CPU hours" in card
 
 
+def test_push_finetune_preset_is_the_shipped_push_models_recipe() -> None:
+    from fignet_gym.training import PRESETS
+
+    shipped = load_pretrained("push").config.to_dict()
+    for key, value in PRESETS["push-finetune"]["simulator"].items():
+        if key == "mesh_options":
+            assert all(shipped[key][k] == v for k, v in value.items())
+        else:
+            assert shipped[key] == value, key
+
+
 def test_unknown_pretrained_name_lists_the_available_ones() -> None:
     with pytest.raises(CheckpointError, match="available: .*push"):
         load_pretrained("no-such-model")
