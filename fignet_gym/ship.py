@@ -15,7 +15,7 @@ from fignet_gym.data.format import build_scene, load_trajectories
 from fignet_gym.evaluation import rollout_metrics
 from fignet_gym.pretrained_models import pretrained_dir
 from fignet_gym.simulator import LearnedSimulator
-from fignet_gym.training import auto_noise_std
+from fignet_gym.training import median_node_acceleration
 
 
 def ship(run: str, name: str, data: str, horizon: int, num: int = 64, dest: str | None = None,
@@ -27,7 +27,7 @@ def ship(run: str, name: str, data: str, horizon: int, num: int = 64, dest: str 
     trajs = load_trajectories(data)[:num]
     metrics = rollout_metrics(sim, trajs, horizon=horizon)
     scenes = [build_scene(t, sim.config.mesh_options) for t in trajs]
-    metrics["median_node_acceleration"] = auto_noise_std(trajs, scenes, 1.0)
+    metrics["median_node_acceleration"] = median_node_acceleration(trajs, scenes)
     out = Path(dest) if dest else pretrained_dir()
     out.mkdir(parents=True, exist_ok=True)
     card_meta = {"run": str(run_dir), "validation_at_export": meta.get("valid", {}),

@@ -281,12 +281,7 @@ class LearnedSimulator(nn.Module):
             non-dynamic nodes).
         """
         hist, nxt = poses[:-1], poses[-1]
-        if inputs is not None:
-            noisy = inputs
-        elif self.config.noise_std > 0:
-            noisy = self.pose_noise(scene, hist, generator)
-        else:
-            noisy = hist
+        noisy = inputs if inputs is not None else self.pose_noise(scene, hist, generator)
         inputs = self.build_inputs(scene, noisy, nxt)
         x_true_t = scene.node_positions(hist[-1])
         noise_last = inputs.node_hist[-1] - x_true_t
@@ -303,22 +298,23 @@ class LearnedSimulator(nn.Module):
         Noise is rigid (a translation and a rotation about the centre of mass per object and frame)
         because rollouts are shape matched: the errors a model meets at test time are rigid too.
         The rotation's std is ``rotation_noise_std``, or by default ``noise_std / radius`` so that
-        node displacements are ``~noise_std``.
+        node displacements are ``~noise_std``. ``noise_std = 0`` turns all noise off.
         """
+        if self.config.noise_std <= 0:
+            return hist
         H, n_obj = hist.shape[0], hist.shape[1]
-        sigma = self.config.noise_std / math.sqrt(max(H - 1, 1))
+        walk = math.sqrt(max(H - 1, 1))  # increments add up to the std at the last frame
+        sigma = self.config.noise_std / walk
         dev, dt = hist.device, hist.dtype
         dtrans = torch.randn(H - 1, n_obj, 3, generator=gen, device=dev, dtype=dt) * sigma
         if self.config.rotation_noise_std > 0:
-            rot_sigma = hist.new_full((n_obj,), self.config.rotation_noise_std / math.sqrt(max(H - 1, 1)))
+            rot_sigma = hist.new_full((n_obj,), self.config.rotation_noise_std / walk)
         else:
             rot_sigma = sigma / self._object_radius(scene)
         drot = torch.randn(H - 1, n_obj, 3, generator=gen, device=dev, dtype=dt) * rot_sigma[:, None]
         zero = torch.zeros(1, n_obj, 3, device=dev, dtype=dt)
         trans = torch.cat((zero, dtrans.cumsum(0)), 0)
         rotvec = torch.cat((zero, drot.cumsum(0)), 0)
-        mask = scene.dynamic_mask[None, :, None].to(dt)
-        trans, rotvec = trans * mask, rotvec * mask
         dq = axis_angle_to_quat(rotvec)
         com = scene.com_positions(hist)
         q_new = quat_normalize(quat_mul(dq, hist[..., 3:]))

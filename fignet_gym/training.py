@@ -148,16 +148,16 @@ def node_accelerations(traj: Trajectory, scene: Scene) -> Tensor:
     return x[2:] - 2 * x[1:-1] + x[:-2]
 
 
-def auto_noise_std(trajs: list[Trajectory], scenes: list[Scene], fraction: float) -> float:
-    """``fraction`` x the median acceleration norm (m/step^2) of moving dynamic nodes."""
+def median_node_acceleration(trajs: list[Trajectory], scenes: list[Scene]) -> float:
+    """Median acceleration norm (m/step^2) of moving dynamic nodes: the data's motion scale."""
     norms = []
     for traj, scene in zip(trajs, scenes, strict=True):
         a = node_accelerations(traj, scene).norm(dim=-1).flatten()
         norms.append(a[a > 1e-7])
     allnorms = torch.cat(norms)
     if allnorms.numel() == 0:
-        raise ValueError("training data has no motion: cannot choose a noise scale")
-    return float(fraction * allnorms.median())
+        raise ValueError("trajectories have no motion: no acceleration scale to measure")
+    return float(allnorms.median())
 
 
 class WindowSampler:
@@ -321,7 +321,8 @@ class Trainer:
         self.train_scenes = [build_scene(t, mesh_opts) for t in train]
         self.valid_scenes = [build_scene(t, mesh_opts) for t in valid]
         if config.noise_std <= 0 and cfg.noise_fraction > 0:
-            config = replace(config, noise_std=auto_noise_std(train, self.train_scenes, cfg.noise_fraction))
+            scale = median_node_acceleration(train, self.train_scenes)
+            config = replace(config, noise_std=cfg.noise_fraction * scale)
         self.sim = LearnedSimulator(config).to(self.device)
         self.opt = torch.optim.Adam(self.sim.parameters(), lr=cfg.lr)
         gamma = (cfg.lr_final / cfg.lr) ** (1.0 / max(cfg.steps, 1))
@@ -420,7 +421,7 @@ class Trainer:
         if k == 0:
             return poses, None
         H = self.sim.config.history + 1
-        hist = self.sim.pose_noise(scene, poses[:H], self.gen) if self.sim.config.noise_std > 0 else poses[:H]
+        hist = self.sim.pose_noise(scene, poses[:H], self.gen)
         for j in range(k):
             nxt = self.sim.step(scene, hist, poses[H + j])
             hist = torch.cat((hist[1:], nxt[None]), 0)
