@@ -88,7 +88,7 @@ def one_step_errors(sim: LearnedSimulator, scene: Scene, true: Tensor) -> dict[s
     sums = torch.zeros(6, dtype=torch.float64)
     for t in range(H, true.shape[0]):
         poses = (sim.step(scene, true[t - H:t], true[t]),
-                 constant_velocity(true[t - 2:t + 1].cpu(), 2)[0].to(dev), true[t], true[t - 1])
+                 constant_velocity(true[t - 2:t + 1], 2)[0], true[t], true[t - 1])
         c = [scene.com_positions(x)[dyn] for x in poses]
         pred, cv, nxt, cur = (x[dyn] for x in poses)
         # [model, constant velocity, true motion] for translation, then for rotation.
@@ -107,7 +107,7 @@ def constant_velocity(true: Tensor, H: int) -> Tensor:
     """Baseline: each object keeps the velocity of its last two observed poses. ``-> float[T, O, 7]``."""
     p0, p1 = true[H - 2], true[H - 1]
     steps = true.shape[0] - H
-    k = torch.arange(1, steps + 1, dtype=true.dtype)[:, None, None]
+    k = torch.arange(1, steps + 1, dtype=true.dtype, device=true.device)[:, None, None]
     pos = p1[None, :, :3] + k * (p1[:, :3] - p0[:, :3])[None]
     dq = quat_to_axis_angle(quat_mul(p1[:, 3:], quat_conj(p0[:, 3:])))
     quat = quat_normalize(quat_mul(axis_angle_to_quat(k * dq[None]), p1[None, :, 3:].expand(steps, -1, -1)))
