@@ -100,10 +100,11 @@ def clip_length(d: Tensor, max_len: float) -> Tensor:
     return d * (max_len / n.clamp_min(max_len))
 
 
-def feature_sizes(history: int, num_props: int = 3, next_separation: bool = False) -> dict[str, int]:
+def feature_sizes(history: int, num_props: int = 3, next_separation: bool = False,
+                  contact_lever: bool = False) -> dict[str, int]:
     """Input feature sizes of each graph element for ``history`` velocities."""
     node = 4 * history + num_props + 1 + 4
-    face = 4 * 7 + 6 + (4 if next_separation else 0)
+    face = 4 * 7 + 6 + (4 if next_separation else 0) + (4 if contact_lever else 0)
     return {"node": node, "object": node, "mesh": 8, "obj_mesh": 8, "face": face, "world": 4}
 
 
@@ -119,7 +120,8 @@ def _node_features(pos_hist: Tensor, kin: Tensor, kin_disp: Tensor, props: Tenso
 
 
 def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, clip: float = 0.0,
-                       kin_disp: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor]:
+                       kin_disp: Tensor | None = None, node_com: Tensor | None = None,
+                       ) -> tuple[Tensor, Tensor, Tensor]:
     """Face-face hyper-edge features (paper eq. 1) with each face's nodes sorted by distance.
 
     Args:
@@ -133,10 +135,17 @@ def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, clip:
             overlap it will make) if the receiver stays. The network could combine ``d_rs`` with
             the nodes' displacement features itself, but a contact onset hinges on the sign of
             this millimetre-scale difference, and one feature makes it explicit.
+        node_com: ``float[N, 3]`` centre of mass of each node's object. When given,
+            ``[l_r, |l_r|]`` is appended: the receiver's closest point relative to its object's
+            centre of mass (clipped like the spans), the lever arm of the contact force. The
+            torque it makes is one cross product of two features of the same edge, where without
+            it the network must assemble the lever from the face spans and the nodes' offsets to
+            the centre of mass over several message-passing steps.
 
     Returns:
-        ``(senders int64[C, 3], receivers int64[C, 3], features float[C, 34 or 38])`` with features
-        ``[d_rs, |d_rs|, (d_sj, |d_sj|)_j, (d_rj, |d_rj|)_j, n_s, n_r (, d_rs_next, |d_rs_next|)]``.
+        ``(senders int64[C, 3], receivers int64[C, 3], features float[C, 34 to 42])`` with features
+        ``[d_rs, |d_rs|, (d_sj, |d_sj|)_j, (d_rj, |d_rj|)_j, n_s, n_r (, d_rs_next, |d_rs_next|)
+        (, l_r, |l_r|)]``.
     """
     c = contacts.sender_face.shape[0]
     # Sender and receiver faces as one batch of 2C rows: [senders; receivers].
@@ -157,6 +166,9 @@ def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, clip:
     if kin_disp is not None:
         shift = kin_disp.index_select(0, nodes[:c].reshape(-1)).view(c, 3, 3).mean(1)
         out.append(with_norm(d_rs - shift))
+    if node_com is not None:
+        com_r = node_com.index_select(0, faces[contacts.receiver_face, 0])
+        out.append(with_norm(clip_length(contacts.receiver_point - com_r, clip)))
     return nodes[:c], nodes[c:], torch.cat(out, dim=-1)
 
 
@@ -184,7 +196,7 @@ def _static_features(scene: Scene, clip: float) -> dict[str, Tensor]:
 def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Tensor,
                 com_next: Tensor, contacts: FaceContacts | None,
                 node_edges: tuple[Tensor, Tensor] | None = None, clip: float = 0.0,
-                next_separation: bool = False) -> Graph:
+                next_separation: bool = False, contact_lever: bool = False) -> Graph:
     """Assemble all un-normalised input features.
 
     Args:
@@ -198,7 +210,7 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
         clip: length (m) above which face spanning vectors and object-mesh offsets are shortened
             (0: the paper's unclipped features).
         next_separation: append the next-step separation to face features
-            (:func:`face_edge_features`).
+            (:func:`face_edge_features`); contact_lever: the receiver's lever arm, likewise.
     """
     static = _static_features(scene, clip)
     n = node_hist.shape[1]
@@ -212,7 +224,8 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
     s, r = scene.mesh_edges
     mesh_f = torch.cat((with_norm(cur.index_select(0, s) - cur.index_select(0, r)), static["mesh_ref"]),
                        dim=-1)
-    rel = with_norm(clip_length(cur - cur_com.index_select(0, scene.node_object), clip))
+    node_com = cur_com.index_select(0, scene.node_object)
+    rel = with_norm(clip_length(cur - node_com, clip))
     # Object->mesh: d = x_sender(object) - x_receiver(node); mesh->object is its negation (the
     # norms stay).
     flip = rel.new_tensor([-1.0, -1.0, -1.0, 1.0])
@@ -222,10 +235,12 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
     empty_i = torch.zeros(0, dtype=torch.long, device=cur.device)
     if contacts is not None:
         fs, fr, ff = face_edge_features(cur, scene.faces, contacts, clip,
-                                        kin_disp[:n] if next_separation else None)
+                                        kin_disp[:n] if next_separation else None,
+                                        node_com if contact_lever else None)
     else:
         fs = fr = empty_i.reshape(0, 3)
-        ff = cur.new_zeros(0, feature_sizes(1, next_separation=next_separation)["face"])
+        ff = cur.new_zeros(0, feature_sizes(1, next_separation=next_separation,
+                                            contact_lever=contact_lever)["face"])
     if node_edges is not None:
         ns, nr = node_edges
         nf = with_norm(cur[ns] - cur[nr])

@@ -73,6 +73,9 @@ class SimulatorConfig:
         next_separation: append to face-face features the separation a kinematic sender face
             will leave after its known next displacement (see ``graph.face_edge_features``); not
             in the paper, for contact onsets under a pusher.
+        contact_lever: append to face-face features the receiver's closest point relative to its
+            object's centre of mass, the lever arm of the contact force (not in the paper; for
+            the yaw a push makes).
         scene_type: what the model was trained on ("push", "toss", ...; "" = unspecified).
         mesh_options: how MuJoCo primitives are meshed for this model.
     """
@@ -93,6 +96,7 @@ class SimulatorConfig:
     vertical_weight: float = 1.0
     gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     next_separation: bool = False
+    contact_lever: bool = False
     scene_type: str = ""
     mesh_options: MeshOptions = field(default_factory=MeshOptions)
 
@@ -139,7 +143,8 @@ class LearnedSimulator(nn.Module):
         super().__init__()
         self.config = config or SimulatorConfig()
         c = self.config
-        sizes = feature_sizes(c.history, next_separation=c.next_separation)
+        sizes = feature_sizes(c.history, next_separation=c.next_separation,
+                              contact_lever=c.contact_lever)
         face, node = c.collision == "face", c.collision == "node"
         self.net = EncodeProcessDecode(
             sizes, latent=c.latent_size, hidden=c.hidden_size or c.latent_size,
@@ -170,7 +175,8 @@ class LearnedSimulator(nn.Module):
         node_hist, node_next, com_hist, com_next = nodes[:-1], nodes[-1], coms[:-1], coms[-1]
         contacts, node_edges = self.collide(scene, node_hist[-1])
         graph = build_graph(scene, node_hist, com_hist, node_next, com_next, contacts, node_edges,
-                            clip=self.config.feature_clip, next_separation=self.config.next_separation)
+                            clip=self.config.feature_clip, next_separation=self.config.next_separation,
+                            contact_lever=self.config.contact_lever)
         return StepInputs(graph, node_hist, node_next, contacts)
 
     def collide(self, scene: Scene, node_pos: Tensor

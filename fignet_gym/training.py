@@ -30,6 +30,7 @@ from torch import Tensor
 
 from fignet_gym.data.format import Trajectory, load_trajectories
 from fignet_gym.geometry import quat_mul, segment_sum
+from fignet_gym.graph import feature_sizes
 from fignet_gym.scene import Scene
 from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
 
@@ -54,6 +55,8 @@ class TrainConfig:
             (``k`` uniform in ``0..unroll_steps``, no gradient) from noisy inputs, then is
             supervised on the next step from its own predicted history, so that it learns to
             correct the errors it really makes, not only synthetic noise.
+        unroll_after: optimiser steps of plain one-step training before pushforward begins: an
+            untrained model's own rollouts are junk states to learn from.
         rotate_z: random rotation of each window about the vertical axis.
         valid_every: steps between validation rollouts; valid_trajectories: how many;
             valid_horizon: the step at which errors are scored (``best.pt`` has the lowest sum of
@@ -76,6 +79,7 @@ class TrainConfig:
     near_motion_weight: float = 3.0
     rigid_loss_weight: float = 1.0
     unroll_steps: int = 0
+    unroll_after: int = 0
     rotate_z: bool = True
     valid_every: int = 1000
     valid_trajectories: int = 8
@@ -113,10 +117,13 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
                       "training": dict(batch_size=16, lr=1e-4, lr_final=1e-5, unroll_steps=6,
                                        rigid_loss_weight=3.0, valid_every=500, valid_trajectories=100,
                                        valid_horizon=25)},
+    # Pushforward (up to 3 steps) once 5000 plain steps have taught the model something, and the
+    # weight average; the shipped toss model reached the same recipe in two warm-started stages.
     "toss-cpu": {"simulator": dict(latent_size=64, message_passing_steps=5, mesh_edges=False,
                                    collision_radius=0.1, scene_type="toss", gravity=(0.0, 0.0, -10.0),
                                    feature_clip=3.0),
-                 "training": dict(batch_size=4)},
+                 "training": dict(steps=40_000, batch_size=4, lr=1e-3, lr_final=3e-5, unroll_steps=3,
+                                  unroll_after=5000, valid_every=1000, valid_trajectories=16)},
     "paper": {"simulator": dict(latent_size=128, message_passing_steps=10, mesh_edges=True),
               "training": dict(batch_size=8)},
 }
@@ -239,25 +246,50 @@ def rigid_terms(scene: Scene, pos: Tensor, acc: Tensor) -> tuple[Tensor, Tensor]
 
 
 # ----------------------------------------------------------------------------- trainer
+# Optional face-feature groups in their column order, each with the base columns whose
+# normaliser statistics a new group starts from (same scale): d_rs for the next-step separation,
+# the receiver's farthest span (about an object radius) for the lever arm.
+_FACE_OPTIONS = (("next_separation", slice(0, 4)), ("contact_lever", slice(24, 28)))
+
+
+def _face_columns(config: SimulatorConfig) -> list[tuple[str, int]]:
+    """Face-feature columns of ``config`` as ``(group, index within group)``, in layout order."""
+    cols = [("base", i) for i in range(feature_sizes(config.history)["face"])]
+    for name, _ in _FACE_OPTIONS:
+        if getattr(config, name):
+            cols += [(name, i) for i in range(4)]
+    return cols
+
+
 def warm_start(sim: LearnedSimulator, source: LearnedSimulator) -> None:
     """Copy ``source``'s weights and normaliser statistics into ``sim``.
 
-    The architectures must match, except that ``sim`` may add the next-step separation to the
-    face features (``next_separation``): the face encoder's new input columns start at zero, so
-    the warm-started model computes exactly what ``source`` did, and the new features' normaliser
-    statistics start as those of ``d_rs``, whose scale they share.
+    The architectures must match, except that ``sim`` may add optional face features
+    (``next_separation``, ``contact_lever``): the face encoder's input columns for a new group
+    start at zero, so the warm-started model computes exactly what ``source`` did, and the new
+    columns' normaliser statistics start as those of base columns of the same scale.
     """
     own, src = sim.state_dict(), source.state_dict()
     if set(own) != set(src):
         raise ValueError(f"cannot warm-start: parameters differ ({sorted(set(own) ^ set(src))[:4]} ...)")
+    new_cols, old_cols = _face_columns(sim.config), _face_columns(source.config)
+    if not set(old_cols) <= set(new_cols):
+        raise ValueError("cannot warm-start: the source has face features this model lacks")
+    stats_from = dict(_FACE_OPTIONS)
+    # For each of this model's face columns: the source column it copies, or (for a new group)
+    # the source column its statistics start from, with its weights zeroed.
+    pick = [old_cols.index(c) if c in old_cols else stats_from[c[0]].start + c[1] for c in new_cols]
+    fresh = torch.tensor([c not in old_cols for c in new_cols])
     widen = {"net.enc.face.first.weight", "norms.face.total", "norms.face.total_sq"}
     for key, value in src.items():
         target = own[key]
-        if target.shape == value.shape:
+        if target.shape == value.shape and (key not in widen or not fresh.any()):
             target.copy_(value)
-        elif key in widen and target.shape == (*value.shape[:-1], value.shape[-1] + 4):
-            extra = value[..., :4] if key.startswith("norms") else torch.zeros_like(value[..., :4])
-            target.copy_(torch.cat((value, extra), -1))
+        elif key in widen and value.shape[-1] == len(old_cols) and target.shape[-1] == len(new_cols):
+            cols = value[..., pick].clone()
+            if key.startswith("net."):
+                cols[..., fresh] = 0.0
+            target.copy_(cols)
         else:
             raise ValueError(f"cannot warm-start {key}: shape {tuple(value.shape)} -> {tuple(target.shape)}")
 
@@ -408,7 +440,8 @@ class Trainer:
         return Scene.batch(scenes).to(self.device), torch.cat(poses, dim=1).to(self.device)
 
     def pushforward(self, scene: Scene, poses: Tensor, k: int | None = None) -> tuple[Tensor, Tensor | None]:
-        """Roll the model out for ``k`` steps (default: drawn uniformly from ``0..unroll_steps``)
+        """Roll the model out for ``k`` steps (default: drawn uniformly from ``0..unroll_steps``,
+        0 during the first ``unroll_after`` optimiser steps)
         from the noisy start of the window ``poses float[H + 1 + K, O, 7]``. Returns the last
         ``H + 1`` true poses and the model's own history ``float[H, O, 7]`` to use instead of
         their first ``H`` rows (``None`` when ``k = 0``: plain noise)."""
@@ -416,7 +449,8 @@ class Trainer:
         if K <= 0:
             return poses, None
         if k is None:
-            k = int(torch.randint(0, K + 1, (), generator=self.gen, device=self.device))
+            warm = self.state.step < self.cfg.unroll_after
+            k = 0 if warm else int(torch.randint(0, K + 1, (), generator=self.gen, device=self.device))
         poses = poses[K - k:]
         if k == 0:
             return poses, None

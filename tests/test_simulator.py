@@ -247,21 +247,52 @@ def test_last_block_has_no_dead_weights_and_old_checkpoints_load(tmp_path, push_
         LearnedSimulator.load(old)
 
 
-def test_warm_start_onto_next_separation_features_keeps_the_function(push_like_xml: str) -> None:
+@pytest.mark.parametrize("before, after", [
+    ({}, {"next_separation": True}),
+    ({"next_separation": True}, {"next_separation": True, "contact_lever": True}),
+    ({}, {"contact_lever": True}),
+])
+def test_warm_start_onto_new_face_features_keeps_the_function(push_like_xml: str, before: dict,
+                                                              after: dict) -> None:
     from fignet_gym.training import warm_start
 
-    source = LearnedSimulator(SMALL).eval()
+    source = LearnedSimulator(replace(SMALL, **before)).eval()
     randomize_normalizers(source, push_like_xml)
-    wide = LearnedSimulator(replace(SMALL, next_separation=True)).eval()
+    wide = LearnedSimulator(replace(SMALL, **after)).eval()
     warm_start(wide, source)
     scene, hist = scene_and_history(push_like_xml)
     nxt = hist[-1].clone()
     nxt[2, 0] -= 0.01  # the tip moves on: the new features are non-zero
     g = wide.build_inputs(scene, hist, nxt).graph
-    assert g.face_edges.features.shape[1] == 38 and g.face_edges.features[:, 34:].abs().sum() > 0
+    assert g.face_edges.features.shape[1] == 34 + 4 * len(after)
+    assert g.face_edges.features[:, 34:].abs().sum() > 0
     assert torch.allclose(wide.step(scene, hist, nxt), source.step(scene, hist, nxt), atol=1e-6)
     with pytest.raises(ValueError, match="cannot warm-start"):
         warm_start(LearnedSimulator(replace(SMALL, latent_size=8)), source)
+    with pytest.raises(ValueError, match="cannot warm-start"):  # features cannot be dropped
+        warm_start(source, wide)
+
+
+def test_contact_lever_is_the_receiver_point_from_its_objects_centre_of_mass(push_like_xml: str) -> None:
+    sim = LearnedSimulator(replace(SMALL, contact_lever=True, feature_clip=0.0)).eval()
+    scene, hist = scene_and_history(push_like_xml)
+    inputs = sim.build_inputs(scene, hist, hist[-1])
+    f, contacts = inputs.graph.face_edges.features, inputs.contacts
+    assert f.shape[0] > 0
+    obj = scene.node_object[scene.faces[contacts.receiver_face, 0]]
+    com = scene.com_positions(hist[-1])[obj]
+    lever = contacts.receiver_point - com
+    assert torch.allclose(f[:, -4:-1], lever, atol=1e-6)
+    assert torch.allclose(f[:, -1], lever.norm(dim=-1), atol=1e-6)
+    # The closest point lies on the receiver's mesh: no farther from its centre than its nodes.
+    reach = (scene.node_positions(hist[-1]) - scene.com_positions(hist[-1])[scene.node_object]).norm(dim=-1)
+    radius = torch.zeros(scene.num_objects).scatter_reduce(0, scene.node_object, reach, "amax")
+    assert (lever.norm(dim=-1) <= radius[obj] + 1e-6).all()
+    # Moving the whole scene leaves every lever as it was.
+    shifted = hist.clone()
+    shifted[..., :3] += torch.tensor([0.3, -0.2, 0.1])
+    f2 = sim.build_inputs(scene, shifted, shifted[-1]).graph.face_edges.features
+    assert torch.allclose(f2[:, -4:], f[:, -4:], atol=1e-5)
 
 
 def test_rigid_training_noise_has_the_configured_scales(push_like_xml: str) -> None:

@@ -110,6 +110,24 @@ def test_pushforward_feeds_the_models_own_rollout(push_file: Path, tmp_path: Pat
     assert torch.isfinite(trainer.loss(scene, window))
 
 
+def test_pushforward_waits_for_unroll_after(push_file: Path, tmp_path: Path) -> None:
+    trajs = load_trajectories(push_file)
+    sim_cfg, cfg = load_run_config("push-cpu", {**TINY, "training.unroll_steps": 3,
+                                                "training.unroll_after": 5})
+    trainer = Trainer(sim_cfg, cfg, trajs[:2], trajs[2:], tmp_path / "warm")
+    H = trainer.sim.config.history + 1
+    scene, window = trainer.batch()
+    rng_state = trainer.gen.get_state()
+    for _ in range(20):  # warm-up: plain one-step examples, and no random draw is spent on k
+        poses, hist = trainer.pushforward(scene, window)
+        assert hist is None and torch.equal(poses, window[-(H + 1):])
+    assert torch.equal(trainer.gen.get_state(), rng_state)
+    trainer.run(stop_after=5)
+    assert trainer.state.step == 5
+    draws = {trainer.pushforward(scene, window)[1] is None for _ in range(30)}
+    assert draws == {True, False}
+
+
 def test_sampler_weights_still_windows_near_motion_above_other_still_windows(push_file: Path) -> None:
     from fignet_gym.data.format import build_scene
     from fignet_gym.training import WindowSampler
