@@ -14,7 +14,7 @@ from typing import Any
 from fignet_gym.data.format import build_scene, load_trajectories
 from fignet_gym.evaluation import rollout_metrics
 from fignet_gym.pretrained_models import pretrained_dir
-from fignet_gym.simulator import LearnedSimulator
+from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
 from fignet_gym.training import median_node_acceleration
 
 
@@ -63,6 +63,7 @@ FIGNet, latent {c.latent_size}, {c.message_passing_steps} message-passing steps,
 {"on" if c.mesh_edges else "off"}, object nodes {"on" if c.object_nodes else "off"}, {c.collision}
 collision edges with d_c = {c.collision_radius} m, history {c.history} velocities, learned step
 dt = {c.dt} s, scene type `{c.scene_type}`, {n_params / 1e6:.2f} M parameters.
+Face-edge features beyond the paper's: {_extras(c)}.
 Mesh options: {c.mesh_options}.
 
 ## Training
@@ -75,7 +76,7 @@ Mesh options: {c.mesh_options}.
   input noise std {c.noise_std:.3g} m ({c.noise_std / m["median_node_acceleration"]:.2g} x the median
   per-step acceleration of moving nodes in the held-out data, {m["median_node_acceleration"]:.2g} m);
   rotational noise std {c.rotation_noise_std or "(from the position noise)"} rad; pushforward unrolls
-  of up to {tr.get("unroll_steps", 0)} steps; random rotations about z; Adam, lr {tr.get("lr")} decaying
+  of up to {tr.get("unroll_steps", 0)} steps (from step {tr.get("unroll_after", 0)}); random rotations about z; Adam, lr {tr.get("lr")} decaying
   to {tr.get("lr_final")}; weight average (EMA) decay {tr.get("ema_decay", 0)}.
 {notes}
 ## Scores on held-out data (`{data}`, {m["trajectories"]} trajectories)
@@ -98,6 +99,12 @@ constant-velocity model's in brackets): translation {m["one_step_translation"]:.
 Collision edges per scene-step: {m["collision_edges_per_step"]:.1f}.
 Floor penetration ratio (predicted / MuJoCo): {m["penetration_ratio"]:.2f}.
 """
+
+
+def _extras(c: SimulatorConfig) -> str:
+    names = {"next_separation": "next-step separation from kinematic faces",
+             "contact_lever": "contact lever arm (receiver point from its centre of mass)"}
+    return ", ".join(v for k, v in names.items() if getattr(c, k)) or "none"
 
 
 def _interval(ci: list[float]) -> str:

@@ -50,6 +50,7 @@ class TrainConfig:
             after the window: those (a pusher closing in, not yet touching; an object that has
             just stopped) weigh ``near_motion_weight``, so that the model learns when contact has
             not begun yet and that an object once stopped stays put.
+        start_weight: extra factor on windows whose supervised step starts an object from rest.
         rigid_loss_weight: weight of the per-object linear and angular acceleration loss terms.
         unroll_steps: pushforward training: each batch first rolls the model out for ``k`` steps
             (``k`` uniform in ``0..unroll_steps``, no gradient) from noisy inputs, then is
@@ -77,6 +78,7 @@ class TrainConfig:
     still_weight: float = 0.1
     near_motion_poses: int = 10
     near_motion_weight: float = 3.0
+    start_weight: float = 1.0
     rigid_loss_weight: float = 1.0
     unroll_steps: int = 0
     unroll_after: int = 0
@@ -178,13 +180,16 @@ class WindowSampler:
     approach windows a model learns that a pusher within the collision radius always moves the
     object, and starts it too early; without the settling windows, that a slowly sliding object
     keeps sliding (a rollout's small excess velocity after a glancing push then never dies out).
+    A window whose supervised step starts an object from rest weighs ``start_weight`` times its
+    acceleration weight: in quasi-static pushing that one step sets the whole velocity and spin,
+    which later steps only continue.
     """
 
     def __init__(self, trajs: list[Trajectory], scenes: list[Scene], history: int,
                  still_weight: float, seed: int, accel_cap: float = 10.0, unroll: int = 0,
-                 near: int = 0, near_weight: float = 1.0) -> None:
+                 near: int = 0, near_weight: float = 1.0, start_weight: float = 1.0) -> None:
         self.trajs, self.scenes, self.span = trajs, scenes, history + 2 + unroll
-        index, weight, accel = [], [], []
+        index, weight, accel, start = [], [], [], []
         for i, (traj, scene) in enumerate(zip(trajs, scenes, strict=True)):
             poses = traj.poses
             dyn = scene.dynamic_mask.numpy()
@@ -195,6 +200,7 @@ class WindowSampler:
                 # The target acceleration of window t is at pose t + span - 2 (index into acc).
                 accel.append(float(acc[t + self.span - 3]))
                 end = t + self.span - 1
+                start.append(bool(moved[end - 1] and not moved[end - 2]))
                 if moved[t:end].any():
                     weight.append(-1.0)
                 else:
@@ -207,6 +213,7 @@ class WindowSampler:
         moving = w < 0
         a_ref = float(np.median(a[moving])) if moving.any() else 1.0
         w[moving] = 1.0 + np.minimum(a[moving] / max(a_ref, 1e-12), accel_cap)
+        w[np.asarray(start)] *= start_weight
         self.prob = w / w.sum()
         self.rng = np.random.default_rng(seed)
 
@@ -364,7 +371,7 @@ class Trainer:
         seed = cfg.seed + 1000 * self.rank
         self.sampler = WindowSampler(train, self.train_scenes, config.history, cfg.still_weight, seed,
                                      unroll=cfg.unroll_steps, near=cfg.near_motion_poses,
-                                     near_weight=cfg.near_motion_weight)
+                                     near_weight=cfg.near_motion_weight, start_weight=cfg.start_weight)
         self.gen = torch.Generator(device=self.device).manual_seed(seed)
         if init is not None and blob is None:
             # Fine-tuning: weights and normaliser statistics from another run, this run's recipe.

@@ -149,3 +149,11 @@ def test_sampler_weights_still_windows_near_motion_above_other_still_windows(pus
             assert wt == pytest.approx(50.0), t  # approach or just stopped
         else:
             assert wt == pytest.approx(1.0), t
+    # Start weight: only the window supervised on the push's first moving step (pose first ->
+    # first + 1, the window's last step) changes, by the factor.
+    boosted = WindowSampler([traj], [scene], history=2, still_weight=0.1, seed=0, near=3,
+                            near_weight=5.0, start_weight=4.0)
+    ratio = (boosted.prob / boosted.prob[0]) / w
+    onset = first - (span - 2)
+    assert ratio[onset] == pytest.approx(4.0)
+    assert np.allclose(np.delete(ratio, onset), 1.0)
