@@ -19,11 +19,12 @@ def test_shipped_models_load_offline_with_model_cards() -> None:
         assert f'load_pretrained("{name}")' in card and "CPU hours" in card
 
 
-def test_push_finetune_preset_is_the_shipped_push_models_recipe() -> None:
+@pytest.mark.parametrize("preset, name", [("push-finetune", "push"), ("toss-cpu", "toss")])
+def test_presets_are_the_shipped_models_recipes(preset: str, name: str) -> None:
     from fignet_gym.training import PRESETS
 
-    shipped = load_pretrained("push").config.to_dict()
-    for key, value in PRESETS["push-finetune"]["simulator"].items():
+    shipped = load_pretrained(name).config.to_dict()
+    for key, value in PRESETS[preset]["simulator"].items():
         if key == "mesh_options":
             assert all(shipped[key][k] == v for k, v in value.items())
         else:
