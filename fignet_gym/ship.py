@@ -78,7 +78,8 @@ Mesh options: {c.mesh_options}.
   rotational noise std {c.rotation_noise_std or "(from the position noise)"} rad; pushforward unrolls
   of up to {tr.get("unroll_steps", 0)} steps (from step {tr.get("unroll_after", 0)}); random rotations about z; Adam, lr {tr.get("lr")} decaying
   to {tr.get("lr_final")}; weight average (EMA) decay {tr.get("ema_decay", 0)}.
-{notes}
+{notes.rstrip()}
+
 ## Scores on held-out data (`{data}`, {m["trajectories"]} trajectories)
 Rollouts from the first {c.history + 1} true poses; errors after {m["horizon_step"]} steps
 ({m["seconds"]:.2f} s), medians over trajectories.
