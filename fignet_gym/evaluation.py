@@ -131,6 +131,23 @@ def errors(scene: Scene, pred: Tensor, true: Tensor) -> tuple[Tensor, Tensor]:
     return trans, rot
 
 
+def rotation_gain(dynamic: Tensor, start: Tensor, pred: Tensor, true: Tensor, min_deg: float = 1.0
+                  ) -> float:
+    """Median of predicted over true turning angle since ``start`` (geodesic, magnitudes only).
+
+    ``dynamic bool[O]``; ``start, pred, true float[O, 7]``. Only dynamic objects that truly turn
+    by more than ``min_deg`` count (NaN if none does). 1 is right on average in size; a model that
+    turns pushed objects the right way but too little (a common failure) scores below 1, which
+    the rotation error alone does not show.
+    """
+    turn_t = torch.rad2deg(quat_angle(start[:, 3:], true[:, 3:]))
+    turn_p = torch.rad2deg(quat_angle(start[:, 3:], pred[:, 3:]))
+    keep = dynamic & (turn_t > min_deg)
+    if not keep.any():
+        return math.nan
+    return float((turn_p[keep] / turn_t[keep]).median())
+
+
 def floor_penetration(scene: Scene, poses: Tensor) -> Tensor:
     """Mean depth (m) of dynamic nodes below ``z = 0`` per step: ``float[T, O, 7] -> float[T]``."""
     z = scene.node_positions(poses)[..., 2][:, scene.dynamic_mask[scene.node_object]]
@@ -174,6 +191,7 @@ def rollout_metrics(sim: LearnedSimulator, trajs: list[Trajectory], scenes: list
     for i, q in enumerate(("translation_rmse", "rotation_deg")):
         out[f"{q}_ratio_still_ci95"] = median_ratio_interval(per_model[""][i][k].numpy(),
                                                              per_model["still_"][i][k].numpy())
+    out["rotation_gain"] = rotation_gain(scene.dynamic_mask, true[H - 1], pred[k], gt[k])
     pen_p, pen_t = floor_penetration(scene, pred).mean(), floor_penetration(scene, gt).mean()
     out["penetration_ratio"] = float(pen_p / pen_t) if pen_t > 0 else math.nan
     out["penetration_m"] = float(pen_p)
@@ -230,6 +248,8 @@ def print_table(res: dict[str, Any]) -> None:
     print(f"collision edges per scene-step {res['collision_edges_per_step']:.1f}, "
           f"{res['ms_per_step_batched']:.1f} ms per batched step, "
           f"floor penetration ratio {res['penetration_ratio']:.2f}")
+    print(f"rotation gain (predicted / true turn of objects turning > 1 deg, median) "
+          f"{res['rotation_gain']:.2f}")
 
 
 def plot_curves(res: dict[str, Any], path: Path) -> None:

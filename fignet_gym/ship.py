@@ -99,6 +99,7 @@ constant-velocity model's in brackets): translation {m["one_step_translation"]:.
 ({m["one_step_constvel_rotation"]:.3f}).
 Collision edges per scene-step: {m["collision_edges_per_step"]:.1f}.
 Floor penetration ratio (predicted / MuJoCo): {m["penetration_ratio"]:.2f}.
+Rotation gain (median of predicted / true turn, objects turning more than 1 deg): {m["rotation_gain"]:.2f}.
 """
 
 

@@ -51,3 +51,22 @@ def test_median_ratio_interval_brackets_known_ratios() -> None:
     lo, hi = median_ratio_interval(other, ref)
     assert lo < 1.0 < hi and hi - lo > 0.1
     assert all(math.isnan(x) for x in median_ratio_interval(np.zeros(0), np.zeros(0)))
+
+
+def test_rotation_gain_hand_cases() -> None:
+    from fignet_gym.evaluation import rotation_gain
+
+    def about(axis: int, deg: float) -> torch.Tensor:  # pose at the origin, turned about an axis
+        q = torch.zeros(7)
+        q[3] = math.cos(math.radians(deg) / 2)
+        q[4 + axis] = math.sin(math.radians(deg) / 2)
+        return q
+
+    start = torch.stack([about(2, 0.0)] * 4)
+    true = torch.stack([about(2, 10.0), about(2, 20.0), about(2, 0.5), about(2, 30.0)])
+    dyn = torch.tensor([True, True, True, False])  # object 3 is kinematic, object 2 barely turns
+    half = torch.stack([about(2, 5.0), about(0, 10.0), about(2, 40.0), about(2, 0.0)])
+    assert rotation_gain(dyn, start, half, true) == pytest.approx(0.5, abs=1e-4)  # size, not axis
+    assert rotation_gain(dyn, start, true, true) == pytest.approx(1.0, abs=1e-4)
+    assert rotation_gain(dyn, start, start, true) == pytest.approx(0.0, abs=1e-4)
+    assert math.isnan(rotation_gain(dyn, start, true, start))  # nothing turns: undefined
