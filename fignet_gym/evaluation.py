@@ -9,7 +9,9 @@ trajectory with kinematic and static objects following their true poses:
 * penetration: mean depth (m) of dynamic nodes below the floor plane ``z = 0`` per step, as a ratio
   of the prediction's to the ground truth's (MuJoCo's soft contacts penetrate a little too);
 * collision edges per step (face-face, or node-node for the MGN baselines) and milliseconds per
-  learned step.
+  learned step;
+* rotation gain: median over objects of predicted / true turning angle at the horizon (below 1:
+  the model turns objects too little).
 
 Two reference models give the errors a scale: *no motion* (every object keeps its initial pose; the
 unit of the paper's Fig. 7c) and *constant velocity* (each object keeps its last observed velocity).
