@@ -100,11 +100,17 @@ def clip_length(d: Tensor, max_len: float) -> Tensor:
     return d * (max_len / n.clamp_min(max_len))
 
 
+# Face-edge feature layout: the paper's 34 columns, then each optional group that is switched on
+# (4 columns each: a vector and its norm), in this order.
+FACE_BASE = 4 * 7 + 6
+FACE_EXTRAS = ("next_separation", "contact_lever")
+
+
 def feature_sizes(history: int, num_props: int = 3, next_separation: bool = False,
                   contact_lever: bool = False) -> dict[str, int]:
     """Input feature sizes of each graph element for ``history`` velocities."""
     node = 4 * history + num_props + 1 + 4
-    face = 4 * 7 + 6 + (4 if next_separation else 0) + (4 if contact_lever else 0)
+    face = FACE_BASE + 4 * (int(next_separation) + int(contact_lever))
     return {"node": node, "object": node, "mesh": 8, "obj_mesh": 8, "face": face, "world": 4}
 
 

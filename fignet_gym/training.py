@@ -30,7 +30,7 @@ from torch import Tensor
 
 from fignet_gym.data.format import Trajectory, load_trajectories
 from fignet_gym.geometry import quat_mul, segment_sum
-from fignet_gym.graph import feature_sizes
+from fignet_gym.graph import FACE_BASE, FACE_EXTRAS
 from fignet_gym.scene import Scene
 from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
 
@@ -253,16 +253,16 @@ def rigid_terms(scene: Scene, pos: Tensor, acc: Tensor) -> tuple[Tensor, Tensor]
 
 
 # ----------------------------------------------------------------------------- trainer
-# Optional face-feature groups in their column order, each with the base columns whose
-# normaliser statistics a new group starts from (same scale): d_rs for the next-step separation,
-# the receiver's farthest span (about an object radius) for the lever arm.
-_FACE_OPTIONS = (("next_separation", slice(0, 4)), ("contact_lever", slice(24, 28)))
+# First of the 4 base face columns whose normaliser statistics a newly added optional group
+# starts from (same scale): d_rs for the next-step separation, the receiver's farthest span
+# (about an object radius) for the lever arm.
+_STATS_FROM = {"next_separation": 0, "contact_lever": 24}
 
 
 def _face_columns(config: SimulatorConfig) -> list[tuple[str, int]]:
     """Face-feature columns of ``config`` as ``(group, index within group)``, in layout order."""
-    cols = [("base", i) for i in range(feature_sizes(config.history)["face"])]
-    for name, _ in _FACE_OPTIONS:
+    cols = [("base", i) for i in range(FACE_BASE)]
+    for name in FACE_EXTRAS:
         if getattr(config, name):
             cols += [(name, i) for i in range(4)]
     return cols
@@ -282,10 +282,9 @@ def warm_start(sim: LearnedSimulator, source: LearnedSimulator) -> None:
     new_cols, old_cols = _face_columns(sim.config), _face_columns(source.config)
     if not set(old_cols) <= set(new_cols):
         raise ValueError("cannot warm-start: the source has face features this model lacks")
-    stats_from = dict(_FACE_OPTIONS)
     # For each of this model's face columns: the source column it copies, or (for a new group)
     # the source column its statistics start from, with its weights zeroed.
-    pick = [old_cols.index(c) if c in old_cols else stats_from[c[0]].start + c[1] for c in new_cols]
+    pick = [old_cols.index(c) if c in old_cols else _STATS_FROM[c[0]] + c[1] for c in new_cols]
     fresh = torch.tensor([c not in old_cols for c in new_cols])
     widen = {"net.enc.face.first.weight", "norms.face.total", "norms.face.total_sq"}
     for key, value in src.items():
