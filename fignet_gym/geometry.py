@@ -126,6 +126,40 @@ def segment_sum(values: Tensor, segment: Tensor, num_segments: int) -> Tensor:
     return out.index_add_(0, segment, values)
 
 
+def rigid_projection(field: Tensor, pos: Tensor, segment: Tensor, num_segments: int) -> Tensor:
+    """Least-squares projection of a per-node vector field onto each object's rigid fields.
+
+    Every object's part of ``field`` is replaced by the closest field of the form
+    ``A + alpha x (pos - centroid)`` (one linear and one angular term per object): for node
+    accelerations, the linearised motion that shape matching keeps of them. A point force at
+    one node thus becomes a translation plus the torque about the centroid it exerts.
+
+    Args:
+        field: ``float[N, 3]`` e.g. node accelerations.
+        pos: ``float[N, 3]`` node positions (world frame).
+        segment: ``int64[N]`` object of each node, in ``[0, num_segments)``.
+        num_segments: ``O``.
+
+    Returns:
+        ``float[N, 3]``, orthogonal projection (idempotent; rigid fields are kept as they are).
+    """
+    count = segment_sum(torch.ones_like(pos[:, 0]), segment, num_segments).clamp_min(1)
+    r = pos - (segment_sum(pos, segment, num_segments) / count[:, None])[segment]
+    lin = segment_sum(field, segment, num_segments) / count[:, None]
+    torque = segment_sum(torch.cross(r, field, dim=-1), segment, num_segments)
+    # Geometric inertia sum |r|^2 I - r r^T per object, solved in float64: objects are cm-sized,
+    # so its entries are ~1e-4 and float32 would lose the small angular terms.
+    rr = r.double()
+    outer = rr[:, :, None] * rr[:, None, :]
+    eye = torch.eye(3, dtype=torch.float64, device=pos.device)
+    inertia = segment_sum((rr * rr).sum(-1)[:, None, None] * eye - outer, segment, num_segments)
+    # A tiny ridge keeps single-node and collinear objects (no rotation defined about the line) finite.
+    ridge = 1e-9 * inertia.diagonal(dim1=-2, dim2=-1).sum(-1).clamp_min(1e-30)
+    alpha = torch.linalg.solve(inertia + ridge[:, None, None] * eye, torque.double()[:, :, None])
+    alpha = alpha[:, :, 0].to(field.dtype)
+    return lin[segment] + torch.cross(alpha[segment], r, dim=-1)
+
+
 def kabsch(
     reference: Tensor, target: Tensor, segment: Tensor, num_segments: int,
     weights: Tensor | None = None, min_singular: float = 1e-9,

@@ -47,6 +47,8 @@ class Graph:
         mesh_edges: mesh edges within objects.
         face_edges: face-face collision hyper-edges.
         node_edges: node-node collision edges (MeshGraphNets baseline), else empty.
+        node_pos: ``float[N, 3]`` current node positions: not a feature (the network sees only
+            relative ones), the basis of the optional rigid projection of its output.
     """
 
     node_features: Tensor
@@ -57,6 +59,7 @@ class Graph:
     mesh_edges: EdgeSet
     face_edges: FaceEdgeSet
     node_edges: EdgeSet
+    node_pos: Tensor | None = None
 
     def edge_features(self, name: str) -> Tensor:
         """Features of the edge type ``name`` (mesh, obj_mesh, mesh_obj, face, world)."""
@@ -257,5 +260,5 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
         node_features=node_f, object_features=obj_f, node_object=scene.node_object,
         obj_mesh_features=om_f, mesh_obj_features=mo_f,
         mesh_edges=EdgeSet(s, r, mesh_f), face_edges=FaceEdgeSet(fs, fr, ff),
-        node_edges=EdgeSet(ns, nr, nf),
+        node_edges=EdgeSet(ns, nr, nf), node_pos=cur,
     )

@@ -64,6 +64,8 @@ FIGNet, latent {c.latent_size}, {c.message_passing_steps} message-passing steps,
 collision edges with d_c = {c.collision_radius} m, history {c.history} velocities, learned step
 dt = {c.dt} s, scene type `{c.scene_type}`, {n_params / 1e6:.2f} M parameters.
 Face-edge features beyond the paper's: {_extras(c)}.
+Output: per-node accelerations, {"projected onto each object's rigid motions in training and in every step"
+if c.rigid_output else "shape matched into poses in rollouts (as in the paper)"}.
 Mesh options: {c.mesh_options}.
 
 ## Training
@@ -99,7 +101,9 @@ constant-velocity model's in brackets): translation {m["one_step_translation"]:.
 ({m["one_step_constvel_rotation"]:.3f}).
 Collision edges per scene-step: {m["collision_edges_per_step"]:.1f}.
 Floor penetration ratio (predicted / MuJoCo): {m["penetration_ratio"]:.2f}.
-Rotation gain (median of predicted / true turn, objects turning more than 1 deg): {m["rotation_gain"]:.2f}.
+Rotation gain (median of predicted / true turn, objects turning more than 1 deg): {m["rotation_gain"]:.2f};
+teacher-forced one-step spin gain (slope of predicted on true change of angular velocity):
+{m.get("one_step_spin_gain", float("nan")):.2f}.
 """
 
 

@@ -23,6 +23,7 @@ from fignet_gym.geometry import (
     quat_mul,
     quat_normalize,
     quat_rotate,
+    rigid_projection,
     segment_sum,
 )
 from fignet_gym.graph import Graph, build_graph, feature_sizes
@@ -76,6 +77,11 @@ class SimulatorConfig:
         contact_lever: append to face-face features the receiver's closest point relative to its
             object's centre of mass, the lever arm of the contact force (not in the paper; for
             the yaw a push makes).
+        rigid_output: project the network's node accelerations onto each object's rigid motions
+            (:func:`geometry.rigid_projection`) before the loss and in every step (not in the
+            paper, which shape-matches only in rollouts). The network may then express a contact
+            as a force at the nodes it touches, and the projection turns it into the torque about
+            the centroid analytically, instead of each node having to compute ``alpha x r``.
         scene_type: what the model was trained on ("push", "toss", ...; "" = unspecified).
         mesh_options: how MuJoCo primitives are meshed for this model.
     """
@@ -97,6 +103,7 @@ class SimulatorConfig:
     gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     next_separation: bool = False
     contact_lever: bool = False
+    rigid_output: bool = False
     scene_type: str = ""
     mesh_options: MeshOptions = field(default_factory=MeshOptions)
 
@@ -216,7 +223,15 @@ class LearnedSimulator(nn.Module):
         else:
             with torch.autocast(self.device.type, dtype=self.inference_dtype):
                 out = self.net(graph).float()
-        return self.target_norm.inverse(out) + self.gravity_step()
+        return self._rigid(self.target_norm.inverse(out), graph) + self.gravity_step()
+
+    def _rigid(self, acc: Tensor, graph: Graph) -> Tensor:
+        """Accelerations ``float[N, 3]`` (m per step^2) projected per object if ``rigid_output``."""
+        if not self.config.rigid_output:
+            return acc
+        if graph.node_pos is None:
+            raise ValueError("rigid_output needs the graph's node positions (build_graph sets them)")
+        return rigid_projection(acc, graph.node_pos, graph.node_object, graph.object_features.shape[0])
 
     def gravity_step(self) -> Tensor:
         """The gravity prior ``g dt^2`` (m per step^2), ``float[3]``."""
@@ -346,6 +361,8 @@ class LearnedSimulator(nn.Module):
         if accumulate:
             self.target_norm.accumulate(target[weight > 0])
         pred = self.net(self.normalize(graph, accumulate))
+        if self.config.rigid_output:
+            pred = self.target_norm(self._rigid(self.target_norm.inverse(pred), graph))
         err = (pred - self.target_norm(target)) ** 2
         comp = err.new_tensor([1.0, 1.0, self.config.vertical_weight])
         loss = (err * comp).sum(-1).mul(weight).sum() / (weight.sum() * comp.sum()).clamp_min(1.0)

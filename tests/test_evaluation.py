@@ -9,6 +9,7 @@ import torch
 from fignet_gym.data.format import build_scene
 from fignet_gym.data.generate import iter_trajectories
 from fignet_gym.evaluation import median_ratio_interval, one_step_errors, rollout_metrics
+from fignet_gym.geometry import quat_mul
 from fignet_gym.scene import Scene
 from tests.sim_factories import zero_simulator
 
@@ -28,6 +29,8 @@ def test_zero_network_scores_as_constant_velocity(pushes: list) -> None:
     assert m["one_step_constvel_translation"] > 0.01  # the pushes start and stop: real errors
     assert m["one_step_translation"] == pytest.approx(m["one_step_constvel_translation"], rel=1e-3)
     assert m["one_step_rotation"] == pytest.approx(m["one_step_constvel_rotation"], rel=2e-2)
+    # It keeps every spin as it is: no change of angular velocity, whatever the true one.
+    assert abs(m["one_step_spin_gain"]) < 0.05
 
 
 def test_rollout_metrics_of_a_model_that_never_moves_is_the_no_motion_reference(pushes: list) -> None:
@@ -70,3 +73,18 @@ def test_rotation_gain_hand_cases() -> None:
     assert rotation_gain(dyn, start, true, true) == pytest.approx(1.0, abs=1e-4)
     assert rotation_gain(dyn, start, start, true) == pytest.approx(0.0, abs=1e-4)
     assert math.isnan(rotation_gain(dyn, start, true, start))  # nothing turns: undefined
+
+
+def test_spin_change_hand_case() -> None:
+    from fignet_gym.evaluation import spin_change
+
+    def about_z(rad: float) -> torch.Tensor:
+        return torch.tensor([[math.cos(rad / 2), 0.0, 0.0, math.sin(rad / 2)]], dtype=torch.float64)
+
+    # Turning 0.1 rad, then 0.3 rad: the spin grew by 0.2 rad per step about z.
+    out = spin_change(about_z(0.0), about_z(0.1), about_z(0.4))
+    assert torch.allclose(out, torch.tensor([[0.0, 0.0, 0.2]], dtype=torch.float64), atol=1e-9)
+    # A steady spin (also about a tilted axis, from a turned start) does not change.
+    tilt = torch.tensor([[math.cos(0.3), math.sin(0.3), 0.0, 0.0]], dtype=torch.float64)
+    steady = [quat_mul(quat_mul(about_z(0.2 * k), tilt), about_z(0.7)) for k in range(3)]
+    assert torch.allclose(spin_change(*steady), torch.zeros(1, 3, dtype=torch.float64), atol=1e-9)

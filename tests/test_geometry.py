@@ -15,6 +15,7 @@ from fignet_gym.geometry import (
     quat_rotate,
     quat_to_axis_angle,
     quat_to_matrix,
+    rigid_projection,
     transform_points,
 )
 
@@ -77,3 +78,35 @@ def test_kabsch_degenerate_raises() -> None:
     line = torch.tensor([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
     with pytest.raises(ShapeMatchError):
         kabsch(line, line + 1, torch.zeros(3, dtype=torch.long), 1)
+
+
+def test_rigid_projection_of_a_point_force_hand_case() -> None:
+    # Square of 4 nodes in the xy plane, unit push along y at corner (1, 1): translation F/4,
+    # and with inertia sum |r|^2 I - r r^T = diag(4, 4, 8) the spin r x F / 8 = (0, 0, 1/8).
+    pos = torch.tensor([[1.0, 1, 0], [-1, 1, 0], [-1, -1, 0], [1, -1, 0]], dtype=torch.float64) + 5.0
+    force = torch.zeros(4, 3, dtype=torch.float64)
+    force[0, 1] = 1.0
+    out = rigid_projection(force, pos, torch.zeros(4, dtype=torch.long), 1)
+    r = pos - 5.0
+    expect = torch.tensor([0.0, 0.25, 0.0], dtype=torch.float64) + torch.cross(
+        torch.tensor([0.0, 0.0, 0.125], dtype=torch.float64).expand(4, 3), r, dim=-1)
+    assert torch.allclose(out, expect, atol=1e-9)
+
+
+def test_rigid_projection_keeps_rigid_fields_and_removes_only_what_is_orthogonal() -> None:
+    gen = torch.Generator().manual_seed(0)
+    seg = torch.tensor([0] * 8 + [1] * 12 + [2] * 3)
+    pos = torch.randn(23, 3, generator=gen, dtype=torch.float64) * 0.05
+    lin, ang = (torch.randn(3, 3, generator=gen, dtype=torch.float64) for _ in range(2))
+    rigid = lin[seg] + torch.cross(ang[seg], pos, dim=-1)
+    assert torch.allclose(rigid_projection(rigid, pos, seg, 3), rigid, atol=1e-7)
+    field = torch.randn(23, 3, generator=gen, dtype=torch.float64)
+    proj = rigid_projection(field, pos, seg, 3)
+    rest = field - proj
+    # Orthogonal to every rigid field: no net force and no net torque left per object.
+    for o in range(3):
+        m = seg == o
+        assert torch.allclose(rest[m].sum(0), torch.zeros(3, dtype=torch.float64), atol=1e-8)
+        assert torch.allclose(torch.cross(pos[m], rest[m], dim=-1).sum(0),
+                              torch.zeros(3, dtype=torch.float64), atol=1e-8)
+    assert torch.allclose(rigid_projection(proj, pos, seg, 3), proj, atol=1e-7)
