@@ -64,7 +64,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.set_defaults(func=_bench)
 
     t = sub.add_parser("train", help="train a simulator on trajectory files")
-    t.add_argument("--data", required=True, help="training trajectories (HDF5)")
+    t.add_argument("--data", required=True, nargs="+", help="training trajectories (HDF5; several files are pooled)")
     t.add_argument("--valid", help="validation trajectories (default: last 4 of --data)")
     t.add_argument("--config", help="preset name (push-cpu, push-finetune, toss-cpu, paper) or JSON file")
     t.add_argument("--set", help='JSON overrides, e.g. \'{"training.steps": 500}\'')

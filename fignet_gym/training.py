@@ -20,6 +20,7 @@ import json
 import math
 import signal
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -609,11 +610,12 @@ class Trainer:
         self.sim.save(self.out / "last.pt", meta=meta)
 
 
-def train_from_files(data: str, valid: str | None, config: str | None, out: str,
+def train_from_files(data: str | Sequence[str], valid: str | None, config: str | None, out: str,
                      resume: bool = False, overrides: dict[str, Any] | None = None,
                      max_train: int | None = None, init: str | None = None) -> TrainState:
-    """Load data, build a :class:`Trainer` and run it."""
-    train_trajs = load_trajectories(data)
+    """Load data (one file or several, pooled in order), build a :class:`Trainer` and run it."""
+    files = [data] if isinstance(data, (str, Path)) else list(data)
+    train_trajs = [t for f in files for t in load_trajectories(f)]
     if max_train:
         train_trajs = train_trajs[:max_train]
     valid_trajs = load_trajectories(valid) if valid else train_trajs[-4:]

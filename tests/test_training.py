@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 
+from fignet_gym import training
 from fignet_gym.data.format import load_trajectories, write_trajectories
 from fignet_gym.data.generate import iter_trajectories
 from fignet_gym.training import TrainConfig, Trainer, load_run_config, rotate_about_z
@@ -157,3 +158,21 @@ def test_sampler_weights_still_windows_near_motion_above_other_still_windows(pus
     onset = first - (span - 2)
     assert ratio[onset] == pytest.approx(4.0)
     assert np.allclose(np.delete(ratio, onset), 1.0)
+
+
+def test_several_data_files_are_pooled_in_order(push_file: Path, tmp_path: Path,
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    seen = {}
+
+    class Capture:
+        def __init__(self, sim_cfg, cfg, train, valid, out, **kw) -> None:  # noqa: ANN001
+            seen.update(train=train, valid=valid)
+
+        def run(self) -> None:
+            return None
+
+    monkeypatch.setattr(training, "Trainer", Capture)
+    one = load_trajectories(push_file)
+    training.train_from_files([str(push_file), str(push_file)], None, "push-cpu", str(tmp_path))
+    assert [t.name for t in seen["train"]] == [t.name for t in one] * 2
+    assert [t.name for t in seen["valid"]] == [t.name for t in one * 2][-4:]  # the default
