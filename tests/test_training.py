@@ -176,3 +176,12 @@ def test_several_data_files_are_pooled_in_order(push_file: Path, tmp_path: Path,
     training.train_from_files([str(push_file), str(push_file)], None, "push-cpu", str(tmp_path))
     assert [t.name for t in seen["train"]] == [t.name for t in one] * 2
     assert [t.name for t in seen["valid"]] == [t.name for t in one * 2][-4:]  # the default
+
+
+def test_push_scratch_is_the_finetune_model_with_the_rigid_projection() -> None:
+    # The from-scratch push recipe must train the same network as the fine-tuning one (so either
+    # can continue the other's checkpoints), apart from the output projection.
+    scratch, _ = load_run_config("push-scratch")
+    finetune, _ = load_run_config("push-finetune")
+    assert scratch["rigid_output"] and not finetune.get("rigid_output", False)
+    assert {k: v for k, v in scratch.items() if k != "rigid_output"} == finetune
