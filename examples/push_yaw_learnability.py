@@ -19,15 +19,10 @@ import argparse
 import numpy as np
 
 from fignet_gym.data.format import load_trajectories
+from fignet_gym.envs.base import wrap_angle, yaw_of
 
 STEPS = 25  # 0.5 s at dt = 0.02 s, the push target's horizon
 PARAMS = ("friction", "tip_friction", "speed_mm_s", "angle_deg", "position")
-
-
-def _yaw(q: np.ndarray) -> np.ndarray:
-    """Yaw (rad) of ``float[..., 4]`` wxyz quaternions."""
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
 
 
 def push_table(paths: list[str], shapes: list[str]) -> tuple[np.ndarray, np.ndarray]:
@@ -39,8 +34,7 @@ def push_table(paths: list[str], shapes: list[str]) -> tuple[np.ndarray, np.ndar
             m, o = t.metadata, list(t.names).index("object")
             if m["shape"] not in shapes:
                 shapes.append(m["shape"])
-            d = _yaw(t.poses[2 + STEPS, o, 3:]) - _yaw(t.poses[2, o, 3:])
-            y.append(np.degrees((d + np.pi) % (2 * np.pi) - np.pi))
+            y.append(np.degrees(wrap_angle(yaw_of(t.poses[2 + STEPS, o, 3:]) - yaw_of(t.poses[2, o, 3:]))))
             x.append([shapes.index(m["shape"]), *(m[k] for k in PARAMS), m["side"]])
     return np.asarray(x, dtype=np.float64), np.asarray(y)
 

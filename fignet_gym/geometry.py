@@ -126,6 +126,22 @@ def segment_sum(values: Tensor, segment: Tensor, num_segments: int) -> Tensor:
     return out.index_add_(0, segment, values)
 
 
+def rigid_moments(field: Tensor, pos: Tensor, segment: Tensor, num_segments: int
+                  ) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Per-object linear and angular moments of a node vector field ``float[N, 3]`` at node
+    positions ``pos float[N, 3]``.
+
+    Returns ``(count float[O], r float[N, 3], mean float[O, 3], torque float[O, 3])``: node
+    counts (at least 1), each node's offset from its object's node centroid, the field's mean
+    per object and ``sum_i r_i x field_i`` per object.
+    """
+    count = segment_sum(torch.ones_like(pos[:, 0]), segment, num_segments).clamp_min(1)
+    r = pos - (segment_sum(pos, segment, num_segments) / count[:, None])[segment]
+    mean = segment_sum(field, segment, num_segments) / count[:, None]
+    torque = segment_sum(torch.cross(r, field, dim=-1), segment, num_segments)
+    return count, r, mean, torque
+
+
 def rigid_projection(field: Tensor, pos: Tensor, segment: Tensor, num_segments: int) -> Tensor:
     """Least-squares projection of a per-node vector field onto each object's rigid fields.
 
@@ -143,10 +159,7 @@ def rigid_projection(field: Tensor, pos: Tensor, segment: Tensor, num_segments: 
     Returns:
         ``float[N, 3]``, orthogonal projection (idempotent; rigid fields are kept as they are).
     """
-    count = segment_sum(torch.ones_like(pos[:, 0]), segment, num_segments).clamp_min(1)
-    r = pos - (segment_sum(pos, segment, num_segments) / count[:, None])[segment]
-    lin = segment_sum(field, segment, num_segments) / count[:, None]
-    torque = segment_sum(torch.cross(r, field, dim=-1), segment, num_segments)
+    _, r, lin, torque = rigid_moments(field, pos, segment, num_segments)
     # Geometric inertia sum |r|^2 I - r r^T per object, solved in float64: objects are cm-sized,
     # so its entries are ~1e-4 and float32 would lose the small angular terms.
     rr = r.double()

@@ -59,7 +59,7 @@ class Graph:
     mesh_edges: EdgeSet
     face_edges: FaceEdgeSet
     node_edges: EdgeSet
-    node_pos: Tensor | None = None
+    node_pos: Tensor
 
     def edge_features(self, name: str) -> Tensor:
         """Features of the edge type ``name`` (mesh, obj_mesh, mesh_obj, face, world)."""

@@ -103,7 +103,7 @@ Collision edges per scene-step: {m["collision_edges_per_step"]:.1f}.
 Floor penetration ratio (predicted / MuJoCo): {m["penetration_ratio"]:.2f}.
 Rotation gain (median of predicted / true turn, objects turning more than 1 deg): {m["rotation_gain"]:.2f};
 teacher-forced one-step spin gain (slope of predicted on true change of angular velocity):
-{m.get("one_step_spin_gain", float("nan")):.2f}.
+{m["one_step_spin_gain"]:.2f}.
 """
 
 

@@ -229,8 +229,6 @@ class LearnedSimulator(nn.Module):
         """Accelerations ``float[N, 3]`` (m per step^2) projected per object if ``rigid_output``."""
         if not self.config.rigid_output:
             return acc
-        if graph.node_pos is None:
-            raise ValueError("rigid_output needs the graph's node positions (build_graph sets them)")
         return rigid_projection(acc, graph.node_pos, graph.node_object, graph.object_features.shape[0])
 
     def gravity_step(self) -> Tensor:

@@ -30,7 +30,7 @@ import torch
 from torch import Tensor
 
 from fignet_gym.data.format import Trajectory, load_trajectories
-from fignet_gym.geometry import quat_mul, segment_sum
+from fignet_gym.geometry import quat_mul, rigid_moments, segment_sum
 from fignet_gym.graph import FACE_BASE, FACE_EXTRAS
 from fignet_gym.scene import Scene
 from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
@@ -101,22 +101,22 @@ class TrainConfig:
         return TrainConfig(**d)
 
 
+# Latent 64, 5 message-passing steps, no mesh-mesh edges (FIGNet*): ~4x cheaper per graph than
+# the paper's size on these CPUs, which buys more graphs per CPU hour.
+_CPU_SIZE = dict(latent_size=64, message_passing_steps=5, mesh_edges=False)
+# The pusher is meshed as an octagonal prism (0.4 mm from its true 4.75 mm radius): fewer faces.
+_PUSH_SCENE = dict(_CPU_SIZE, collision_radius=0.01, vertical_weight=0.1, scene_type="push",
+                   feature_clip=0.1, mesh_options={"cylinder_sections": 8})
+# The shipped push model's: small position noise, larger rotational noise, next-step separation.
+_PUSH_MODEL = dict(_PUSH_SCENE, noise_std=5e-5, rotation_noise_std=5e-3, next_separation=True)
+
 PRESETS: dict[str, dict[str, dict[str, Any]]] = {
-    # Latent 64, 5 message-passing steps, no mesh-mesh edges (FIGNet*): ~4x cheaper per graph than
-    # the paper's size on these CPUs, which buys more graphs per CPU hour.
-    # The pusher is meshed as an octagonal prism (0.4 mm from its true 4.75 mm radius): fewer faces.
-    "push-cpu": {"simulator": dict(latent_size=64, message_passing_steps=5, mesh_edges=False,
-                                   collision_radius=0.01, vertical_weight=0.1, scene_type="push",
-                                   feature_clip=0.1, mesh_options={"cylinder_sections": 8}),
-                 "training": dict(batch_size=8, valid_horizon=25)},
+    "push-cpu": {"simulator": dict(_PUSH_SCENE), "training": dict(batch_size=8, valid_horizon=25)},
     # The last stage of the shipped push model (see its model card), for fine-tuning a trained
-    # push model (--init): small position noise, larger rotational noise, pushforward. From
-    # scratch it does badly: a random model's pushforward states are junk (measured: 3x the
-    # no-motion error after 0.3 CPU hours; push-cpu's first run was at 0.6x after 0.1).
-    "push-finetune": {"simulator": dict(latent_size=64, message_passing_steps=5, mesh_edges=False,
-                                        collision_radius=0.01, vertical_weight=0.1, scene_type="push",
-                                        feature_clip=0.1, noise_std=5e-5, rotation_noise_std=5e-3,
-                                        next_separation=True, mesh_options={"cylinder_sections": 8}),
+    # push model (--init): pushforward from step 0 at a low learning rate. From scratch it does
+    # badly: a random model's pushforward states are junk (measured: 3x the no-motion error after
+    # 0.3 CPU hours; push-cpu's first run was at 0.6x after 0.1).
+    "push-finetune": {"simulator": dict(_PUSH_MODEL),
                       "training": dict(batch_size=16, lr=1e-4, lr_final=1e-5, unroll_steps=6,
                                        rigid_loss_weight=3.0, valid_every=500, valid_trajectories=100,
                                        valid_horizon=25)},
@@ -124,20 +124,15 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     # and plain one-step training before pushforward (from step 1500). Not yet a shipped model's
     # recipe: on 10000 pushes it reached the shipped push model's validation errors within ~10%
     # at about half its CPU hours (README, "Model size").
-    "push-scratch": {"simulator": dict(latent_size=64, message_passing_steps=5, mesh_edges=False,
-                                       collision_radius=0.01, vertical_weight=0.1, scene_type="push",
-                                       feature_clip=0.1, noise_std=5e-5, rotation_noise_std=5e-3,
-                                       next_separation=True, rigid_output=True,
-                                       mesh_options={"cylinder_sections": 8}),
+    "push-scratch": {"simulator": dict(_PUSH_MODEL, rigid_output=True),
                      "training": dict(steps=40_000, batch_size=16, lr=5e-4, lr_final=1e-5, unroll_steps=6,
                                       unroll_after=1500, rigid_loss_weight=3.0, valid_every=1000,
                                       valid_trajectories=100, valid_horizon=25)},
     # Pushforward (up to 3 steps) once 5000 plain steps have taught the model something, the
     # weight average, and the rigid output projection. The shipped toss model is one run of this
     # preset (its model card names the step).
-    "toss-cpu": {"simulator": dict(latent_size=64, message_passing_steps=5, mesh_edges=False,
-                                   collision_radius=0.1, scene_type="toss", gravity=(0.0, 0.0, -10.0),
-                                   feature_clip=3.0, rigid_output=True),
+    "toss-cpu": {"simulator": dict(_CPU_SIZE, collision_radius=0.1, scene_type="toss",
+                                   gravity=(0.0, 0.0, -10.0), feature_clip=3.0, rigid_output=True),
                  "training": dict(steps=40_000, batch_size=4, lr=1e-3, lr_final=3e-5, unroll_steps=3,
                                   unroll_after=5000, valid_every=1000, valid_trajectories=16)},
     "paper": {"simulator": dict(latent_size=128, message_passing_steps=10, mesh_edges=True),
@@ -257,12 +252,8 @@ def rigid_terms(scene: Scene, pos: Tensor, acc: Tensor) -> tuple[Tensor, Tensor]
     Returns ``(float[O, 3], float[O, 3])``.
     """
     o, seg = scene.num_objects, scene.node_object
-    count = segment_sum(torch.ones_like(acc[:, 0]), seg, o).clamp_min(1)
-    centroid = segment_sum(pos, seg, o) / count[:, None]
-    r = pos - centroid[seg]
-    lin = segment_sum(acc, seg, o) / count[:, None]
+    count, r, lin, torque = rigid_moments(acc, pos, seg, o)
     r2 = segment_sum((r * r).sum(-1), seg, o).clamp_min(1e-12)
-    torque = segment_sum(torch.cross(r, acc, dim=-1), seg, o)
     return lin, torque / r2[:, None] * (r2 / count).sqrt()[:, None]
 
 
