@@ -64,9 +64,11 @@ def build_parser() -> argparse.ArgumentParser:
     b.set_defaults(func=_bench)
 
     t = sub.add_parser("train", help="train a simulator on trajectory files")
-    t.add_argument("--data", required=True, nargs="+", help="training trajectories (HDF5; several files are pooled)")
+    t.add_argument("--data", required=True, nargs="+",
+                   help="training trajectories (HDF5; several files are pooled)")
     t.add_argument("--valid", help="validation trajectories (default: last 4 of --data)")
-    t.add_argument("--config", help="preset name (push-cpu, push-finetune, push-scratch, toss-cpu, paper) or JSON file")
+    t.add_argument("--config",
+                   help="preset name (push-cpu, push-finetune, push-scratch, toss-cpu, paper) or JSON file")
     t.add_argument("--set", help='JSON overrides, e.g. \'{"training.steps": 500}\'')
     t.add_argument("--out", required=True, help="run folder (checkpoints, logs)")
     t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")

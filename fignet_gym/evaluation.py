@@ -87,13 +87,23 @@ def one_step_errors(sim: LearnedSimulator, scene: Scene, true: Tensor) -> dict[s
     right in size on average, below 1 when it turns objects too little. It moves long before
     rollout rotation errors do (a model that gets half of a push's initial spin and then keeps it
     scores 0.5 here).
+
+    ``one_step_free_flight`` is the RMS error of the predicted centre-of-mass acceleration of
+    objects in free flight (whose true acceleration over the history and the step is the
+    simulator's gravity prior), as a fraction of ``|g| dt^2``; NaN without a gravity prior or free
+    objects. Free flight is the easy part of a toss, and its errors grow over every flight.
     """
     H = sim.config.history + 1
     dev = sim.device
     scene = scene.to(dev)
     true = true.to(dev)
     dyn = scene.dynamic_mask
-    sums = torch.zeros(8, dtype=torch.float64)
+    g = sim.gravity_step()
+    g_norm = float(g.norm())
+    com = scene.com_positions(true)  # float[T, O, 3]
+    # Free where the true acceleration is the gravity prior; 2% absorbs float32 storage of poses.
+    free = ((com[2:] - 2 * com[1:-1] + com[:-2] - g).norm(dim=-1) < 0.02 * g_norm) & dyn  # [T-2, O]
+    sums = torch.zeros(10, dtype=torch.float64)
     for t in range(H, true.shape[0]):
         poses = (sim.step(scene, true[t - H:t], true[t]),
                  constant_velocity(true[t - 2:t + 1], 2)[0], true[t], true[t - 1])
@@ -105,6 +115,10 @@ def one_step_errors(sim: LearnedSimulator, scene: Scene, true: Tensor) -> dict[s
         prev = true[t - 2][dyn, 3:]
         d_pred, d_true = (spin_change(prev, cur[:, 3:], x[:, 3:]) for x in (pred, nxt))
         terms += [(d_pred * d_true).sum(), (d_true * d_true).sum()]
+        # Steps t-2 -> t-1 -> t (the history) and t-1 -> t -> t+1 (the predicted one) are free.
+        fly = free[t - 2] & free[max(t - 3, 0)] if g_norm > 0 else torch.zeros_like(dyn)
+        acc = scene.com_positions(poses[0]) - 2 * com[t - 1] + com[t - 2]
+        terms += [((acc[fly] - g) ** 2).sum(), fly.sum()]
         sums += torch.stack(terms).double().cpu()
     out = {}
     for i, kind in ((0, "translation"), (3, "rotation")):
@@ -112,6 +126,8 @@ def one_step_errors(sim: LearnedSimulator, scene: Scene, true: Tensor) -> dict[s
         out[f"one_step_{kind}"] = float(sums[i]) / total if total > 0 else math.nan
         out[f"one_step_constvel_{kind}"] = float(sums[i + 1]) / total if total > 0 else math.nan
     out["one_step_spin_gain"] = float(sums[6] / sums[7]) if sums[7] > 0 else math.nan
+    out["one_step_free_flight"] = (math.sqrt(float(sums[8] / sums[9])) / g_norm if sums[9] > 0
+                                   else math.nan)
     return out
 
 
@@ -270,6 +286,8 @@ def print_table(res: dict[str, Any]) -> None:
     print(f"rotation gain (predicted / true turn of objects turning > 1 deg, median) "
           f"{res['rotation_gain']:.2f}; one-step spin gain (teacher-forced) "
           f"{res['one_step_spin_gain']:.2f}")
+    if math.isfinite(res["one_step_free_flight"]):
+        print(f"one-step free-flight acceleration error (RMS / |g| dt^2) {res['one_step_free_flight']:.3f}")
 
 
 def plot_curves(res: dict[str, Any], path: Path) -> None:

@@ -8,6 +8,7 @@ data, budget (steps, graphs, CPU hours) and scores, so every shipped number can 
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -78,8 +79,9 @@ Mesh options: {c.mesh_options}.
   input noise std {c.noise_std:.3g} m ({c.noise_std / m["median_node_acceleration"]:.2g} x the median
   per-step acceleration of moving nodes in the held-out data, {m["median_node_acceleration"]:.2g} m);
   rotational noise std {c.rotation_noise_std or "(from the position noise)"} rad; pushforward unrolls
-  of up to {tr.get("unroll_steps", 0)} steps (from step {tr.get("unroll_after", 0)}); random rotations about z; Adam, lr {tr.get("lr")} decaying
-  to {tr.get("lr_final")}; weight average (EMA) decay {tr.get("ema_decay", 0)}.
+  of up to {tr.get("unroll_steps", 0)} steps (from step {tr.get("unroll_after", 0)});
+  random rotations about z; Adam, lr {tr.get("lr")} decaying to {tr.get("lr_final")};
+  weight average (EMA) decay {tr.get("ema_decay", 0)}.
 {notes.rstrip()}
 
 ## Scores on held-out data (`{data}`, {m["trajectories"]} trajectories)
@@ -103,7 +105,7 @@ Collision edges per scene-step: {m["collision_edges_per_step"]:.1f}.
 Floor penetration ratio (predicted / MuJoCo): {m["penetration_ratio"]:.2f}.
 Rotation gain (median of predicted / true turn, objects turning more than 1 deg): {m["rotation_gain"]:.2f};
 teacher-forced one-step spin gain (slope of predicted on true change of angular velocity):
-{m["one_step_spin_gain"]:.2f}.
+{m["one_step_spin_gain"]:.2f}.{_free_flight(m)}
 """
 
 
@@ -111,6 +113,12 @@ def _extras(c: SimulatorConfig) -> str:
     names = {"next_separation": "next-step separation from kinematic faces",
              "contact_lever": "contact lever arm (receiver point from its centre of mass)"}
     return ", ".join(v for k, v in names.items() if getattr(c, k)) or "none"
+
+
+def _free_flight(m: dict) -> str:
+    x = m["one_step_free_flight"]
+    return "" if not math.isfinite(x) else (
+        f"\nTeacher-forced acceleration error of objects in free flight (RMS / |g| dt^2): {x:.3f}.")
 
 
 def _interval(ci: list[float]) -> str:

@@ -88,3 +88,25 @@ def test_spin_change_hand_case() -> None:
     tilt = torch.tensor([[math.cos(0.3), math.sin(0.3), 0.0, 0.0]], dtype=torch.float64)
     steady = [quat_mul(quat_mul(about_z(0.2 * k), tilt), about_z(0.7)) for k in range(3)]
     assert torch.allclose(spin_change(*steady), torch.zeros(1, 3, dtype=torch.float64), atol=1e-9)
+
+
+def test_free_flight_error_hand_case() -> None:
+    # Tosses start in the air. A zero network with the gravity prior predicts exactly g dt^2 for
+    # every node, so its free-flight error is 0; shifting its output by half of g dt^2 (through
+    # the target normaliser's mean) makes it exactly 0.5.
+    from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
+    from tests.sim_factories import SMALL
+
+    trajs = list(iter_trajectories("toss-simple", 2, seed=3))
+    sim = LearnedSimulator(SimulatorConfig(**SMALL, gravity=(0.0, 0.0, -10.0), scene_type="toss")).eval()
+    with torch.no_grad():
+        for p in sim.net.parameters():
+            p.zero_()
+    scene = Scene.batch([build_scene(t, sim.config.mesh_options) for t in trajs])
+    true = torch.cat([torch.as_tensor(t.poses[:12], dtype=torch.float32) for t in trajs], 1)
+    assert one_step_errors(sim, scene, true)["one_step_free_flight"] < 1e-3
+    half = 0.5 * 10.0 * 0.02**2
+    sim.target_norm.accumulate(torch.tensor([[0.0, half, 0.0]], dtype=torch.float64).repeat(100, 1))
+    assert one_step_errors(sim, scene, true)["one_step_free_flight"] == pytest.approx(0.5, rel=1e-3)
+    # Without a gravity prior, free flight is not defined.
+    assert math.isnan(one_step_errors(zero_simulator("toss"), scene, true)["one_step_free_flight"])
