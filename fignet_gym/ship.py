@@ -66,7 +66,8 @@ collision edges with d_c = {c.collision_radius} m, history {c.history} velocitie
 dt = {c.dt} s, scene type `{c.scene_type}`, {n_params / 1e6:.2f} M parameters.
 Face-edge features beyond the paper's: {_extras(c)}.
 Output: per-node accelerations, {"projected onto each object's rigid motions in training and in every step"
-if c.rigid_output else "shape matched into poses in rollouts (as in the paper)"}.
+if c.rigid_output else "shape matched into poses in rollouts (as in the paper)"}{
+"; objects receiving no collision edge fall freely (free_flight)" if c.free_flight else ""}.
 Mesh options: {c.mesh_options}.
 
 ## Training

@@ -82,6 +82,13 @@ class SimulatorConfig:
             paper, which shape-matches only in rollouts). The network may then express a contact
             as a force at the nodes it touches, and the projection turns it into the torque about
             the centroid analytically, instead of each node having to compute ``alpha x r``.
+        free_flight: objects whose nodes receive no collision edge fall freely: their predicted
+            residual (beyond the gravity prior) is set to zero, in every step and in the loss (not
+            in the paper). Such an object's graph is cut off from every other object and features
+            are translation invariant, so the network cannot see the floor or another object; the
+            best it could output is an average over the data of what happens next (an impact
+            within the step, the training noise's correction), which makes free flights drift.
+            Rigid bodies in vacuum without contacts fall freely, so this is exact.
         scene_type: what the model was trained on ("push", "toss", ...; "" = unspecified).
         mesh_options: how MuJoCo primitives are meshed for this model.
     """
@@ -104,6 +111,7 @@ class SimulatorConfig:
     next_separation: bool = False
     contact_lever: bool = False
     rigid_output: bool = False
+    free_flight: bool = False
     scene_type: str = ""
     mesh_options: MeshOptions = field(default_factory=MeshOptions)
 
@@ -223,13 +231,25 @@ class LearnedSimulator(nn.Module):
         else:
             with torch.autocast(self.device.type, dtype=self.inference_dtype):
                 out = self.net(graph).float()
-        return self._rigid(self.target_norm.inverse(out), graph) + self.gravity_step()
+        return self._output(self.target_norm.inverse(out), graph) + self.gravity_step()
 
-    def _rigid(self, acc: Tensor, graph: Graph) -> Tensor:
-        """Accelerations ``float[N, 3]`` (m per step^2) projected per object if ``rigid_output``."""
-        if not self.config.rigid_output:
-            return acc
-        return rigid_projection(acc, graph.node_pos, graph.node_object, graph.object_features.shape[0])
+    def _output(self, acc: Tensor, graph: Graph) -> Tensor:
+        """Residual accelerations ``float[N, 3]`` (m per step^2) projected per object if
+        ``rigid_output``, and zero on free objects if ``free_flight``."""
+        if self.config.rigid_output:
+            acc = rigid_projection(acc, graph.node_pos, graph.node_object, graph.object_features.shape[0])
+        if self.config.free_flight:
+            acc = acc * self.objects_in_contact(graph)[graph.node_object, None]
+        return acc
+
+    @staticmethod
+    def objects_in_contact(graph: Graph) -> Tensor:
+        """``bool[O]``: whether a node of the object receives at least one collision edge."""
+        obj = graph.node_object
+        recv = torch.cat((graph.face_edges.receivers.reshape(-1), graph.node_edges.receivers))
+        hit = torch.zeros(graph.object_features.shape[0], dtype=torch.bool, device=obj.device)
+        hit[obj[recv]] = True
+        return hit
 
     def gravity_step(self) -> Tensor:
         """The gravity prior ``g dt^2`` (m per step^2), ``float[3]``."""
@@ -356,11 +376,14 @@ class LearnedSimulator(nn.Module):
         Returns ``(loss scalar, normalised prediction float[N, 3])`` so that callers can add terms
         without running the network twice.
         """
+        if self.config.free_flight:
+            # A free object's prediction is fixed: its target (the noise's correction) teaches nothing.
+            weight = weight * self.objects_in_contact(graph)[graph.node_object]
         if accumulate:
             self.target_norm.accumulate(target[weight > 0])
         pred = self.net(self.normalize(graph, accumulate))
-        if self.config.rigid_output:
-            pred = self.target_norm(self._rigid(self.target_norm.inverse(pred), graph))
+        if self.config.rigid_output or self.config.free_flight:
+            pred = self.target_norm(self._output(self.target_norm.inverse(pred), graph))
         err = (pred - self.target_norm(target)) ** 2
         comp = err.new_tensor([1.0, 1.0, self.config.vertical_weight])
         loss = (err * comp).sum(-1).mul(weight).sum() / (weight.sum() * comp.sum()).clamp_min(1.0)

@@ -491,7 +491,10 @@ class Trainer:
         lin_p, ang_p = rigid_terms(scene, pos, pred)
         lin_t, ang_t = rigid_terms(scene, pos, target / scale)
         dyn = scene.dynamic_mask
-        rigid = (lin_p - lin_t)[dyn].pow(2).mean() + (ang_p - ang_t)[dyn].pow(2).mean()
+        if sim.config.free_flight:  # free objects' predictions are fixed (see SimulatorConfig)
+            dyn = dyn & sim.objects_in_contact(graph)
+        n = dyn.sum().clamp_min(1)  # a batch may have no object in contact
+        rigid = ((lin_p - lin_t)[dyn].pow(2).sum() + (ang_p - ang_t)[dyn].pow(2).sum()) / (3 * n)
         return base + self.cfg.rigid_loss_weight * rigid
 
     # -------------------------------------------------------------- loop

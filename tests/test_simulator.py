@@ -338,3 +338,39 @@ def test_rigid_output_predicts_rigid_motion_in_steps_and_in_the_loss(push_like_x
         graph_t, target, weight = sim.training_example(scene, torch.cat((hist, hist[-1:])))
         _, pred_n = sim.loss(graph_t, target, weight, accumulate=False)
         assert is_rigid(sim.target_norm.inverse(pred_n))
+
+
+def test_free_flight_objects_without_collision_edges_fall_exactly() -> None:
+    from fignet_gym.data.format import build_scene
+    from fignet_gym.data.generate import iter_trajectories
+
+    cfg = replace(SMALL, collision_radius=0.1, gravity=(0.0, 0.0, -10.0), feature_clip=3.0, free_flight=True)
+    sim = LearnedSimulator(cfg).eval()
+    sim.target_norm.accumulate(torch.randn(1000, 3, dtype=torch.float64) * 1e-3)  # a non-zero network
+    plain = LearnedSimulator(replace(cfg, free_flight=False)).eval()
+    plain.load_state_dict(sim.state_dict())
+    traj = list(iter_trajectories("toss-simple", 1, seed=0))[0]
+    scene = build_scene(traj, cfg.mesh_options)
+    poses = torch.as_tensor(traj.poses[:4], dtype=torch.float32)  # objects in the air, some close
+    graph = sim.build_inputs(scene, poses[:3], poses[3]).graph
+    hit = sim.objects_in_contact(graph)
+    # The collision edges decide which objects are in contact: a receiver node of any edge.
+    recv_obj = scene.node_object[graph.face_edges.receivers.reshape(-1)].unique()
+    assert torch.equal(hit.nonzero().squeeze(1), recv_obj)
+    dyn = scene.dynamic_mask
+    free, touched = dyn & ~hit, dyn & hit
+    assert free.any() and touched.any()
+    on_free, on_touched = free[scene.node_object], touched[scene.node_object]
+    with torch.no_grad():
+        acc, acc_plain = sim.predict_acceleration(graph), plain.predict_acceleration(graph)
+        # Exactly the gravity prior on free objects; the network's output elsewhere.
+        assert torch.equal(acc[on_free], sim.gravity_step().expand(int(on_free.sum()), 3))
+        assert torch.equal(acc[on_touched], acc_plain[on_touched])
+        assert not torch.allclose(acc_plain[on_free], sim.gravity_step().expand(int(on_free.sum()), 3))
+        # Free objects carry no weight in the loss: moving their targets leaves it unchanged.
+        graph_t, target, weight = sim.training_example(scene, poses)
+        base, _ = sim.loss(graph_t, target, weight, accumulate=False)
+        target[on_free] += 1.0
+        assert sim.loss(graph_t, target, weight, accumulate=False)[0] == pytest.approx(float(base))
+        target[on_touched] += 1.0
+        assert sim.loss(graph_t, target, weight, accumulate=False)[0] != pytest.approx(float(base))
