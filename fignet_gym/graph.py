@@ -12,6 +12,7 @@ import torch
 from torch import Tensor
 
 from fignet_gym.collision import FaceContacts
+from fignet_gym.geometry import barycentric
 from fignet_gym.scene import ObjectKind, Scene
 
 
@@ -106,14 +107,14 @@ def clip_length(d: Tensor, max_len: float) -> Tensor:
 # Face-edge feature layout: the paper's 34 columns, then each optional group that is switched on
 # (4 columns each: a vector and its norm), in this order.
 FACE_BASE = 4 * 7 + 6
-FACE_EXTRAS = ("next_separation", "contact_lever")
+FACE_EXTRAS = ("next_separation", "contact_lever", "ballistic_separation")
 
 
 def feature_sizes(history: int, num_props: int = 3, next_separation: bool = False,
-                  contact_lever: bool = False) -> dict[str, int]:
+                  contact_lever: bool = False, ballistic_separation: bool = False) -> dict[str, int]:
     """Input feature sizes of each graph element for ``history`` velocities."""
     node = 4 * history + num_props + 1 + 4
-    face = FACE_BASE + 4 * (int(next_separation) + int(contact_lever))
+    face = FACE_BASE + 4 * (int(next_separation) + int(contact_lever) + int(ballistic_separation))
     return {"node": node, "object": node, "mesh": 8, "obj_mesh": 8, "face": face, "world": 4}
 
 
@@ -130,7 +131,7 @@ def _node_features(pos_hist: Tensor, kin: Tensor, kin_disp: Tensor, props: Tenso
 
 def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, clip: float = 0.0,
                        kin_disp: Tensor | None = None, node_com: Tensor | None = None,
-                       ) -> tuple[Tensor, Tensor, Tensor]:
+                       node_step: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor]:
     """Face-face hyper-edge features (paper eq. 1) with each face's nodes sorted by distance.
 
     Args:
@@ -150,17 +151,26 @@ def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, clip:
             torque it makes is one cross product of two features of the same edge, where without
             it the network must assemble the lever from the face spans and the nodes' offsets to
             the centre of mass over several message-passing steps.
+        node_step: ``float[N, 3]`` each node's expected displacement over the next step (its
+            last velocity plus the gravity prior if dynamic, its known displacement if not).
+            When given, ``[d_rs_ball, |d_rs_ball|]`` is appended: ``d_rs`` after both closest
+            points move by ``node_step`` interpolated at them (barycentric weights). Whether two
+            faces within ``d_c`` touch within the step (an impact) or pass (a near miss) hinges
+            on this difference of a separation and a relative velocity at the contact point.
 
     Returns:
-        ``(senders int64[C, 3], receivers int64[C, 3], features float[C, 34 to 42])`` with features
+        ``(senders int64[C, 3], receivers int64[C, 3], features float[C, 34 to 46])`` with features
         ``[d_rs, |d_rs|, (d_sj, |d_sj|)_j, (d_rj, |d_rj|)_j, n_s, n_r (, d_rs_next, |d_rs_next|)
-        (, l_r, |l_r|)]``.
+        (, l_r, |l_r|) (, d_rs_ball, |d_rs_ball|)]``.
     """
     c = contacts.sender_face.shape[0]
     # Sender and receiver faces as one batch of 2C rows: [senders; receivers].
     nodes = faces.index_select(0, torch.cat((contacts.sender_face, contacts.receiver_face)))
     point = torch.cat((contacts.sender_point, contacts.receiver_point))
     x = pos.index_select(0, nodes.reshape(-1)).view(-1, 3, 3)  # [2C, vertex, 3]
+    if node_step is not None:  # interpolated in the original vertex order, before sorting
+        moved = (barycentric(x, point)[..., None]
+                 * node_step.index_select(0, nodes.reshape(-1)).view(-1, 3, 3)).sum(1)  # [2C, 3]
     # Normal from the original vertex order (outward by the mesh's winding), before sorting.
     n = torch.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0], dim=-1)
     n = n / n.norm(dim=-1, keepdim=True).clamp_min(1e-12)
@@ -178,6 +188,8 @@ def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, clip:
     if node_com is not None:
         com_r = node_com.index_select(0, faces[contacts.receiver_face, 0])
         out.append(with_norm(clip_length(contacts.receiver_point - com_r, clip)))
+    if node_step is not None:
+        out.append(with_norm(d_rs + moved[c:] - moved[:c]))
     return nodes[:c], nodes[c:], torch.cat(out, dim=-1)
 
 
@@ -205,7 +217,8 @@ def _static_features(scene: Scene, clip: float) -> dict[str, Tensor]:
 def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Tensor,
                 com_next: Tensor, contacts: FaceContacts | None,
                 node_edges: tuple[Tensor, Tensor] | None = None, clip: float = 0.0,
-                next_separation: bool = False, contact_lever: bool = False) -> Graph:
+                next_separation: bool = False, contact_lever: bool = False,
+                gravity_step: Tensor | None = None) -> Graph:
     """Assemble all un-normalised input features.
 
     Args:
@@ -220,6 +233,8 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
             (0: the paper's unclipped features).
         next_separation: append the next-step separation to face features
             (:func:`face_edge_features`); contact_lever: the receiver's lever arm, likewise.
+        gravity_step: ``float[3]`` gravity prior (m per step^2); when given, the separation after
+            a ballistic step is appended to face features likewise (``ballistic_separation``).
     """
     static = _static_features(scene, clip)
     n = node_hist.shape[1]
@@ -243,13 +258,17 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
 
     empty_i = torch.zeros(0, dtype=torch.long, device=cur.device)
     if contacts is not None:
+        step = None
+        if gravity_step is not None:
+            vel = node_hist[-1] - node_hist[-2] + gravity_step
+            step = torch.where(static["kin"][:n, None] > 0, kin_disp[:n], vel)
         fs, fr, ff = face_edge_features(cur, scene.faces, contacts, clip,
                                         kin_disp[:n] if next_separation else None,
-                                        node_com if contact_lever else None)
+                                        node_com if contact_lever else None, step)
     else:
         fs = fr = empty_i.reshape(0, 3)
-        ff = cur.new_zeros(0, feature_sizes(1, next_separation=next_separation,
-                                            contact_lever=contact_lever)["face"])
+        ff = cur.new_zeros(0, feature_sizes(1, next_separation=next_separation, contact_lever=contact_lever,
+                                            ballistic_separation=gravity_step is not None)["face"])
     if node_edges is not None:
         ns, nr = node_edges
         nf = with_norm(cur[ns] - cur[nr])

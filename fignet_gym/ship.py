@@ -112,7 +112,8 @@ teacher-forced one-step spin gain (slope of predicted on true change of angular 
 
 def _extras(c: SimulatorConfig) -> str:
     names = {"next_separation": "next-step separation from kinematic faces",
-             "contact_lever": "contact lever arm (receiver point from its centre of mass)"}
+             "contact_lever": "contact lever arm (receiver point from its centre of mass)",
+             "ballistic_separation": "separation after a ballistic step"}
     return ", ".join(v for k, v in names.items() if getattr(c, k)) or "none"
 
 

@@ -89,6 +89,10 @@ class SimulatorConfig:
             best it could output is an average over the data of what happens next (an impact
             within the step, the training noise's correction), which makes free flights drift.
             Rigid bodies in vacuum without contacts fall freely, so this is exact.
+        ballistic_separation: append to face-face features the separation of the two closest
+            points after one step in which every node moves on at its last velocity (plus the
+            gravity prior; kinematic nodes by their known displacement): whether faces within
+            ``d_c`` collide within the step or pass (not in the paper; for impacts and near misses).
         scene_type: what the model was trained on ("push", "toss", ...; "" = unspecified).
         mesh_options: how MuJoCo primitives are meshed for this model.
     """
@@ -112,6 +116,7 @@ class SimulatorConfig:
     contact_lever: bool = False
     rigid_output: bool = False
     free_flight: bool = False
+    ballistic_separation: bool = False
     scene_type: str = ""
     mesh_options: MeshOptions = field(default_factory=MeshOptions)
 
@@ -159,7 +164,7 @@ class LearnedSimulator(nn.Module):
         self.config = config or SimulatorConfig()
         c = self.config
         sizes = feature_sizes(c.history, next_separation=c.next_separation,
-                              contact_lever=c.contact_lever)
+                              contact_lever=c.contact_lever, ballistic_separation=c.ballistic_separation)
         face, node = c.collision == "face", c.collision == "node"
         self.net = EncodeProcessDecode(
             sizes, latent=c.latent_size, hidden=c.hidden_size or c.latent_size,
@@ -191,7 +196,8 @@ class LearnedSimulator(nn.Module):
         contacts, node_edges = self.collide(scene, node_hist[-1])
         graph = build_graph(scene, node_hist, com_hist, node_next, com_next, contacts, node_edges,
                             clip=self.config.feature_clip, next_separation=self.config.next_separation,
-                            contact_lever=self.config.contact_lever)
+                            contact_lever=self.config.contact_lever,
+                            gravity_step=self.gravity_step() if self.config.ballistic_separation else None)
         return StepInputs(graph, node_hist, node_next, contacts)
 
     def collide(self, scene: Scene, node_pos: Tensor

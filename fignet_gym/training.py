@@ -261,7 +261,7 @@ def rigid_terms(scene: Scene, pos: Tensor, acc: Tensor) -> tuple[Tensor, Tensor]
 # First of the 4 base face columns whose normaliser statistics a newly added optional group
 # starts from (same scale): d_rs for the next-step separation, the receiver's farthest span
 # (about an object radius) for the lever arm.
-_STATS_FROM = {"next_separation": 0, "contact_lever": 24}
+_STATS_FROM = {"next_separation": 0, "contact_lever": 24, "ballistic_separation": 0}
 
 
 def _face_columns(config: SimulatorConfig) -> list[tuple[str, int]]:
@@ -277,7 +277,7 @@ def warm_start(sim: LearnedSimulator, source: LearnedSimulator) -> None:
     """Copy ``source``'s weights and normaliser statistics into ``sim``.
 
     The architectures must match, except that ``sim`` may add optional face features
-    (``next_separation``, ``contact_lever``): the face encoder's input columns for a new group
+    (``graph.FACE_EXTRAS``): the face encoder's input columns for a new group
     start at zero, so the warm-started model computes exactly what ``source`` did, and the new
     columns' normaliser statistics start as those of base columns of the same scale.
     """

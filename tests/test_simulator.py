@@ -252,6 +252,7 @@ def test_last_block_has_no_dead_weights_and_old_checkpoints_load(tmp_path, push_
     ({}, {"next_separation": True}),
     ({"next_separation": True}, {"next_separation": True, "contact_lever": True}),
     ({}, {"contact_lever": True}),
+    ({"contact_lever": True}, {"contact_lever": True, "ballistic_separation": True}),
 ])
 def test_warm_start_onto_new_face_features_keeps_the_function(push_like_xml: str, before: dict,
                                                               after: dict) -> None:
@@ -374,3 +375,42 @@ def test_free_flight_objects_without_collision_edges_fall_exactly() -> None:
         assert sim.loss(graph_t, target, weight, accumulate=False)[0] == pytest.approx(float(base))
         target[on_touched] += 1.0
         assert sim.loss(graph_t, target, weight, accumulate=False)[0] != pytest.approx(float(base))
+
+
+def test_ballistic_separation_hand_case() -> None:
+    # The hand-computed pair above; the receiver face falls by 0.05 at the touching vertex and
+    # the sender's vertex 0 moves by 0.01 in x. Barycentric weights of the sender point (0.2, 0.3)
+    # are (0.5, 0.2, 0.3); the receiver point is its vertex 3.
+    pos = torch.tensor([[0.0, 0, 0], [1, 0, 0], [0, 1, 0],
+                        [0.2, 0.3, 0.1], [1, 0.3, 1.0], [0.2, 1.1, 0.9]], dtype=torch.float64)
+    step = torch.tensor([[0.01, 0, 0], [0, 0, 0], [0, 0, 0],
+                         [0, 0, -0.05], [0.1, 0, -0.05], [0, 0.2, -0.05]], dtype=torch.float64)
+    faces = torch.tensor([[0, 1, 2], [3, 4, 5]])
+    c = FaceContacts(torch.tensor([0]), torch.tensor([1]), torch.tensor([[0.2, 0.3, 0.0]], dtype=torch.float64),
+                     pos[3:4], torch.tensor([0.1]))
+    _, _, f = face_edge_features(pos, faces, c, node_step=step)
+    assert f.shape == (1, 38)
+    d = torch.tensor([-0.005, 0.0, 0.05], dtype=torch.float64)
+    assert torch.allclose(f[0, 34:], torch.cat((d, d.norm()[None])))
+
+
+def test_ballistic_separation_moves_dynamic_nodes_by_velocity_and_gravity(push_like_xml: str) -> None:
+    g = (0.0, 0.0, -10.0)
+    sim = LearnedSimulator(replace(SMALL, ballistic_separation=True, gravity=g)).eval()
+    scene, hist = scene_and_history(push_like_xml)
+    nxt = hist[-1].clone()
+    nxt[2, 0] -= 0.01  # the tip's known next displacement
+    inputs = sim.build_inputs(scene, hist, nxt)
+    f, con = inputs.graph.face_edges.features, inputs.contacts
+    assert f.shape[1] == 38 and f.shape[0] > 0
+    # The box (object 1) only translates in the history: every node steps by its velocity plus
+    # g dt^2; the tip (2) by its known displacement; the floor (0) stays.
+    steps = torch.zeros(3, 3)
+    steps[1] = hist[-1, 1, :3] - hist[-2, 1, :3] + torch.tensor(g) * sim.config.dt ** 2
+    steps[2] = nxt[2, :3] - hist[-1, 2, :3]
+    s_obj = scene.face_object[con.sender_face]
+    r_obj = scene.face_object[con.receiver_face]
+    assert set(s_obj.tolist()) == {0, 2} and set(r_obj.tolist()) == {1}
+    d = con.receiver_point - con.sender_point + steps[r_obj] - steps[s_obj]
+    assert torch.allclose(f[:, -4:-1], d, atol=1e-6)
+    assert torch.allclose(f[:, -1], d.norm(dim=-1), atol=1e-6)
