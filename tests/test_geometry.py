@@ -126,4 +126,5 @@ def test_barycentric_hand_cases() -> None:
     assert torch.allclose((w[:1, :, None] * moved).sum(1), pts[:1] @ R.T + 0.7)
     # A degenerate (collinear) triangle puts all weight on its first vertex instead of dividing by 0.
     line = torch.tensor([[[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]], dtype=torch.float64)
-    assert barycentric(line, torch.tensor([[0.5, 0.0, 0.0]], dtype=torch.float64)).tolist() == [[1.0, 0.0, 0.0]]
+    mid = torch.tensor([[0.5, 0.0, 0.0]], dtype=torch.float64)
+    assert barycentric(line, mid).tolist() == [[1.0, 0.0, 0.0]]

@@ -386,8 +386,8 @@ def test_ballistic_separation_hand_case() -> None:
     step = torch.tensor([[0.01, 0, 0], [0, 0, 0], [0, 0, 0],
                          [0, 0, -0.05], [0.1, 0, -0.05], [0, 0.2, -0.05]], dtype=torch.float64)
     faces = torch.tensor([[0, 1, 2], [3, 4, 5]])
-    c = FaceContacts(torch.tensor([0]), torch.tensor([1]), torch.tensor([[0.2, 0.3, 0.0]], dtype=torch.float64),
-                     pos[3:4], torch.tensor([0.1]))
+    ps = torch.tensor([[0.2, 0.3, 0.0]], dtype=torch.float64)
+    c = FaceContacts(torch.tensor([0]), torch.tensor([1]), ps, pos[3:4], torch.tensor([0.1]))
     _, _, f = face_edge_features(pos, faces, c, node_step=step)
     assert f.shape == (1, 38)
     d = torch.tensor([-0.005, 0.0, 0.05], dtype=torch.float64)
