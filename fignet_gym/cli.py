@@ -21,7 +21,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     from fignet_gym.evaluation import evaluate
 
     evaluate(args.checkpoint, args.data, args.out, num=args.num, horizon=args.horizon,
-             videos=args.videos)
+             videos=args.videos, against=args.against)
     return 0
 
 
@@ -83,6 +83,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--num", type=int, default=32, help="trajectories to evaluate")
     e.add_argument("--horizon", type=int, default=50, help="step at which errors are reported")
     e.add_argument("--videos", type=int, default=2, help="side-by-side videos to write")
+    e.add_argument("--against", help="second checkpoint (e.g. a baseline) on the same trajectories: "
+                   "ratio of median errors with a bootstrap interval")
     e.set_defaults(func=_evaluate)
 
     s = sub.add_parser("ship", help="export a run's best checkpoint with a model card")

@@ -226,6 +226,7 @@ def rollout_metrics(sim: LearnedSimulator, trajs: list[Trajectory], scenes: list
     for i, q in enumerate(("translation_rmse", "rotation_deg")):
         out[f"{q}_ratio_still_ci95"] = median_ratio_interval(per_model[""][i][k].numpy(),
                                                              per_model["still_"][i][k].numpy())
+        out[f"{q}_per_trajectory"] = per_model[""][i][k].tolist()
     out["rotation_gain"] = rotation_gain(scene.dynamic_mask, true[H - 1], pred[k], gt[k])
     pen_p, pen_t = floor_penetration(scene, pred).mean(), floor_penetration(scene, gt).mean()
     out["penetration_ratio"] = float(pen_p / pen_t) if pen_t > 0 else math.nan
@@ -247,9 +248,26 @@ def median_ratio_interval(model: np.ndarray, ref: np.ndarray, draws: int = 2000,
     return [float(lo), float(hi)]
 
 
+def paired_ratios(res: dict[str, Any], ref: dict[str, Any]) -> dict[str, Any]:
+    """Ratios of two models' median errors on the same trajectories, with bootstrap 95% intervals
+    (trajectories resampled in pairs): ``{"translation_rmse": [ratio, lo, hi], "rotation_deg": ...}``.
+    """
+    out: dict[str, Any] = {}
+    for q in ("translation_rmse", "rotation_deg"):
+        a, b = (np.asarray(r[f"{q}_per_trajectory"]) for r in (res, ref))
+        if a.shape != b.shape:
+            raise ValueError(f"paired ratios need the same trajectories ({a.shape} vs {b.shape})")
+        out[q] = [float(np.median(a) / np.median(b)), *median_ratio_interval(a, b)]
+    return out
+
+
 def evaluate(checkpoint: str, data: str, out: str, num: int = 32, horizon: int = 50,
-             videos: int = 2) -> dict[str, Any]:
-    """Evaluate a checkpoint on a trajectory file: print a table, write JSON, plots and videos."""
+             videos: int = 2, against: str | None = None) -> dict[str, Any]:
+    """Evaluate a checkpoint on a trajectory file: print a table, write JSON, plots and videos.
+
+    ``against``: a second checkpoint rolled out on the same trajectories; the ratios of the two
+    models' median errors, with bootstrap intervals, are printed and stored under ``"against"``.
+    """
     from fignet_gym.data.format import load_trajectories
     from fignet_gym.pretrained_models import resolve_checkpoint
 
@@ -259,6 +277,10 @@ def evaluate(checkpoint: str, data: str, out: str, num: int = 32, horizon: int =
     outdir.mkdir(parents=True, exist_ok=True)
     res = rollout_metrics(sim, trajs, horizon=horizon)
     res.update(checkpoint=str(checkpoint), data=str(data))
+    if against is not None:
+        ref = rollout_metrics(LearnedSimulator.load(resolve_checkpoint(against)), trajs, horizon=horizon)
+        res["against"] = {"checkpoint": str(against), "translation_rmse_final": ref["translation_rmse_final"],
+                          "rotation_deg_final": ref["rotation_deg_final"], "ratios": paired_ratios(res, ref)}
     (outdir / "metrics.json").write_text(json.dumps(res, indent=2))
     print_table(res)
     plot_curves(res, outdir / "errors.png")
@@ -283,6 +305,13 @@ def print_table(res: dict[str, Any]) -> None:
     print(f"collision edges per scene-step {res['collision_edges_per_step']:.1f}, "
           f"{res['ms_per_step_batched']:.1f} ms per batched step, "
           f"floor penetration ratio {res['penetration_ratio']:.2f}")
+    if "against" in res:
+        ag = res["against"]
+        print(f"against {ag['checkpoint']}: translation RMSE {ag['translation_rmse_final']:.4f} m, "
+              f"rotation {ag['rotation_deg_final']:.2f} deg")
+        for q, name in (("translation_rmse", "translation"), ("rotation_deg", "rotation")):
+            r, lo, hi = ag["ratios"][q]
+            print(f"  ratio of medians (this / that), {name}: {r:.3f} (95% interval {lo:.3f}-{hi:.3f})")
     print(f"rotation gain (predicted / true turn of objects turning > 1 deg, median) "
           f"{res['rotation_gain']:.2f}; one-step spin gain (teacher-forced) "
           f"{res['one_step_spin_gain']:.2f}")

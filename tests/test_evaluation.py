@@ -110,3 +110,25 @@ def test_free_flight_error_hand_case() -> None:
     assert one_step_errors(sim, scene, true)["one_step_free_flight"] == pytest.approx(0.5, rel=1e-3)
     # Without a gravity prior, free flight is not defined.
     assert math.isnan(one_step_errors(zero_simulator("toss"), scene, true)["one_step_free_flight"])
+
+
+def test_evaluate_against_a_second_checkpoint_pairs_the_trajectories(pushes: list, tmp_path) -> None:
+    from fignet_gym.data.format import write_trajectories
+    from fignet_gym.evaluation import evaluate, paired_ratios
+    from tests.sim_factories import quiet_simulator
+
+    data = tmp_path / "pushes.h5"
+    write_trajectories(data, pushes)
+    zero, quiet = tmp_path / "zero.pt", tmp_path / "quiet.pt"
+    zero_simulator("push").save(zero)
+    torch.manual_seed(0)
+    quiet_simulator("push").save(quiet)
+    same = evaluate(str(zero), str(data), str(tmp_path / "a"), num=2, horizon=10, videos=0, against=str(zero))
+    assert same["against"]["ratios"]["translation_rmse"] == pytest.approx([1.0, 1.0, 1.0])
+    res = evaluate(str(quiet), str(data), str(tmp_path / "b"), num=2, horizon=10, videos=0, against=str(zero))
+    a, b = (np.asarray(r["translation_rmse_per_trajectory"]) for r in (res, same))
+    ratio, lo, hi = res["against"]["ratios"]["translation_rmse"]
+    assert ratio == pytest.approx(np.median(a) / np.median(b)) and ratio != pytest.approx(1.0)
+    assert lo <= ratio <= hi
+    with pytest.raises(ValueError, match="same trajectories"):
+        paired_ratios(res, {k: v[:1] if k.endswith("per_trajectory") else v for k, v in same.items()})
