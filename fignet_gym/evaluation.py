@@ -249,15 +249,17 @@ def median_ratio_interval(model: np.ndarray, ref: np.ndarray, draws: int = 2000,
 
 
 def paired_ratios(res: dict[str, Any], ref: dict[str, Any]) -> dict[str, Any]:
-    """Ratios of two models' median errors on the same trajectories, with bootstrap 95% intervals
-    (trajectories resampled in pairs): ``{"translation_rmse": [ratio, lo, hi], "rotation_deg": ...}``.
+    """Ratios of two models' median errors on the same trajectories (of the ``*_final`` medians
+    that :func:`rollout_metrics` reports), with bootstrap 95% intervals (trajectories resampled
+    in pairs): ``{"translation_rmse": [ratio, lo, hi], "rotation_deg": [...]}``.
     """
     out: dict[str, Any] = {}
     for q in ("translation_rmse", "rotation_deg"):
         a, b = (np.asarray(r[f"{q}_per_trajectory"]) for r in (res, ref))
         if a.shape != b.shape:
             raise ValueError(f"paired ratios need the same trajectories ({a.shape} vs {b.shape})")
-        out[q] = [float(np.median(a) / np.median(b)), *median_ratio_interval(a, b)]
+        den = ref[f"{q}_final"]
+        out[q] = [res[f"{q}_final"] / den if den > 0 else math.nan, *median_ratio_interval(a, b)]
     return out
 
 
