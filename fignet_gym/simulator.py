@@ -87,8 +87,8 @@ class SimulatorConfig:
             in the paper). Such an object's graph is cut off from every other object and features
             are translation invariant, so the network cannot see the floor or another object; the
             best it could output is an average over the data of what happens next (an impact
-            within the step, the training noise's correction), which makes free flights drift.
-            Rigid bodies in vacuum without contacts fall freely, so this is exact.
+            within the step, the training noise's correction). Rigid bodies in vacuum without
+            contacts fall freely, so this is exact.
         ballistic_separation: append to face-face features the separation of the two closest
             points after one step in which every node moves on at its last velocity (plus the
             gravity prior; kinematic nodes by their known displacement): whether faces within

@@ -259,8 +259,8 @@ def rigid_terms(scene: Scene, pos: Tensor, acc: Tensor) -> tuple[Tensor, Tensor]
 
 # ----------------------------------------------------------------------------- trainer
 # First of the 4 base face columns whose normaliser statistics a newly added optional group
-# starts from (same scale): d_rs for the next-step separation, the receiver's farthest span
-# (about an object radius) for the lever arm.
+# starts from (same scale): d_rs for the next-step and ballistic separations, the receiver's
+# farthest span (about an object radius) for the lever arm.
 _STATS_FROM = {"next_separation": 0, "contact_lever": 24, "ballistic_separation": 0}
 
 
