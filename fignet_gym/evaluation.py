@@ -107,7 +107,8 @@ def one_step_errors(sim: LearnedSimulator, scene: Scene, true: Tensor) -> dict[s
     for t in range(H, true.shape[0]):
         poses = (sim.step(scene, true[t - H:t], true[t]),
                  constant_velocity(true[t - 2:t + 1], 2)[0], true[t], true[t - 1])
-        c = [scene.com_positions(x)[dyn] for x in poses]
+        coms = [scene.com_positions(x) for x in poses[:2]] + [com[t], com[t - 1]]
+        c = [x[dyn] for x in coms]
         pred, cv, nxt, cur = (x[dyn] for x in poses)
         # [model, constant velocity, true motion] for translation, then for rotation.
         terms = ([(c[i] - c[2]).norm(dim=-1).sum() for i in (0, 1, 3)]
@@ -117,7 +118,7 @@ def one_step_errors(sim: LearnedSimulator, scene: Scene, true: Tensor) -> dict[s
         terms += [(d_pred * d_true).sum(), (d_true * d_true).sum()]
         # Steps t-2 -> t-1 -> t (the history) and t-1 -> t -> t+1 (the predicted one) are free.
         fly = free[t - 2] & free[max(t - 3, 0)] if g_norm > 0 else torch.zeros_like(dyn)
-        acc = scene.com_positions(poses[0]) - 2 * com[t - 1] + com[t - 2]
+        acc = coms[0] - 2 * com[t - 1] + com[t - 2]
         terms += [((acc[fly] - g) ** 2).sum(), fly.sum()]
         sums += torch.stack(terms).double().cpu()
     out = {}

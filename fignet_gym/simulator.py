@@ -237,16 +237,16 @@ class LearnedSimulator(nn.Module):
         else:
             with torch.autocast(self.device.type, dtype=self.inference_dtype):
                 out = self.net(graph).float()
-        return self._output(self.target_norm.inverse(out), graph) + self.gravity_step()
-
-    def _output(self, acc: Tensor, graph: Graph) -> Tensor:
-        """Residual accelerations ``float[N, 3]`` (m per step^2) projected per object if
-        ``rigid_output``, and zero on free objects if ``free_flight``."""
-        if self.config.rigid_output:
-            acc = rigid_projection(acc, graph.node_pos, graph.node_object, graph.object_features.shape[0])
+        acc = self._rigid(self.target_norm.inverse(out), graph)
         if self.config.free_flight:
             acc = acc * self.objects_in_contact(graph)[graph.node_object, None]
-        return acc
+        return acc + self.gravity_step()
+
+    def _rigid(self, acc: Tensor, graph: Graph) -> Tensor:
+        """Accelerations ``float[N, 3]`` (m per step^2) projected per object if ``rigid_output``."""
+        if not self.config.rigid_output:
+            return acc
+        return rigid_projection(acc, graph.node_pos, graph.node_object, graph.object_features.shape[0])
 
     @staticmethod
     def objects_in_contact(graph: Graph) -> Tensor:
@@ -323,7 +323,7 @@ class LearnedSimulator(nn.Module):
             ``(graph, target float[N, 3], node_weight float[N])``: raw features, the acceleration
             that maps the noisy inputs onto the true next positions (plus the last frame's noise,
             which no model can see) minus the gravity prior, and a per-node loss weight (0 for
-            non-dynamic nodes).
+            non-dynamic nodes, and with ``free_flight`` for objects without collision edges).
         """
         hist, nxt = poses[:-1], poses[-1]
         noisy = inputs if inputs is not None else self.pose_noise(scene, hist, generator)
@@ -334,7 +334,11 @@ class LearnedSimulator(nn.Module):
         # is to undo the velocity noise (as in learning_to_simulate).
         target_next = scene.node_positions(nxt) + noise_last
         target = target_next - 2 * inputs.node_hist[-1] + inputs.node_hist[-2] - self.gravity_step()
-        weight = scene.dynamic_mask[scene.node_object].to(target.dtype)
+        live = scene.dynamic_mask
+        if self.config.free_flight:
+            # A free object's prediction is fixed: its target (the noise's correction) teaches nothing.
+            live = live & self.objects_in_contact(inputs.graph)
+        weight = live[scene.node_object].to(target.dtype)
         return inputs.graph, target, weight
 
     def pose_noise(self, scene: Scene, hist: Tensor, gen: torch.Generator | None) -> Tensor:
@@ -382,14 +386,11 @@ class LearnedSimulator(nn.Module):
         Returns ``(loss scalar, normalised prediction float[N, 3])`` so that callers can add terms
         without running the network twice.
         """
-        if self.config.free_flight:
-            # A free object's prediction is fixed: its target (the noise's correction) teaches nothing.
-            weight = weight * self.objects_in_contact(graph)[graph.node_object]
         if accumulate:
             self.target_norm.accumulate(target[weight > 0])
         pred = self.net(self.normalize(graph, accumulate))
-        if self.config.rigid_output or self.config.free_flight:
-            pred = self.target_norm(self._output(self.target_norm.inverse(pred), graph))
+        if self.config.rigid_output:
+            pred = self.target_norm(self._rigid(self.target_norm.inverse(pred), graph))
         err = (pred - self.target_norm(target)) ** 2
         comp = err.new_tensor([1.0, 1.0, self.config.vertical_weight])
         loss = (err * comp).sum(-1).mul(weight).sum() / (weight.sum() * comp.sum()).clamp_min(1.0)

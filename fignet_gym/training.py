@@ -491,11 +491,10 @@ class Trainer:
         pos = scene.node_positions(poses[-2])
         lin_p, ang_p = rigid_terms(scene, pos, pred)
         lin_t, ang_t = rigid_terms(scene, pos, target / scale)
-        dyn = scene.dynamic_mask
-        if sim.config.free_flight:  # free objects' predictions are fixed (see SimulatorConfig)
-            dyn = dyn & sim.objects_in_contact(graph)
-        n = dyn.sum().clamp_min(1)  # a batch may have no object in contact
-        rigid = ((lin_p - lin_t)[dyn].pow(2).sum() + (ang_p - ang_t)[dyn].pow(2).sum()) / (3 * n)
+        # The objects the node loss supervises (dynamic ones; with free_flight, those in contact).
+        live = segment_sum(weight, scene.node_object, scene.num_objects) > 0
+        n = live.sum().clamp_min(1)  # a batch may have no object in contact
+        rigid = ((lin_p - lin_t)[live].pow(2).sum() + (ang_p - ang_t)[live].pow(2).sum()) / (3 * n)
         return base + self.cfg.rigid_loss_weight * rigid
 
     # -------------------------------------------------------------- loop
