@@ -1,4 +1,4 @@
-"""``fignet-gym`` command line: demo, bench, train, evaluate, and the data commands."""
+"""``fignet-gym`` command line: demo, bench, train, evaluate, floor, ship, and the data commands."""
 
 from __future__ import annotations
 
@@ -22,6 +22,14 @@ def _evaluate(args: argparse.Namespace) -> int:
 
     evaluate(args.checkpoint, args.data, args.out, num=args.num, horizon=args.horizon,
              videos=args.videos, against=args.against)
+    return 0
+
+
+def _floor(args: argparse.Namespace) -> int:
+    from fignet_gym.evaluation import floor_table
+
+    floor_table(args.data, args.noise, out=args.out, num=args.num, horizon=args.horizon,
+                history=args.history)
     return 0
 
 
@@ -86,6 +94,18 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--against", help="second checkpoint (e.g. a baseline) on the same trajectories: "
                    "ratio of median errors with a bootstrap interval")
     e.set_defaults(func=_evaluate)
+
+    f = sub.add_parser("floor", help="MuJoCo's own rollout error from a slightly wrong start "
+                       "(how chaotic the data is: a floor under learned rollouts)")
+    f.add_argument("--data", required=True, help="generated trajectories (HDF5)")
+    f.add_argument("--noise", type=float, nargs="+", default=[1e-4, 1e-3, 1e-2],
+                   help="start position errors (m) of every free body")
+    f.add_argument("--num", type=int, default=32, help="trajectories to re-simulate")
+    f.add_argument("--horizon", type=int, default=50, help="step at which errors are reported")
+    f.add_argument("--history", type=int, default=2, help="velocities a learned rollout is given "
+                   "(the nudge is at the last of its history + 1 poses)")
+    f.add_argument("--out", help="JSON file for the table")
+    f.set_defaults(func=_floor)
 
     s = sub.add_parser("ship", help="export a run's best checkpoint with a model card")
     s.add_argument("--run", required=True, help="run folder (with best.pt, curve.jsonl)")

@@ -38,8 +38,16 @@ from fignet_gym.geometry import (
     quat_normalize,
     quat_to_axis_angle,
 )
-from fignet_gym.scene import Scene
+from fignet_gym.scene import MeshOptions, Scene
 from fignet_gym.simulator import LearnedSimulator
+
+
+def _common_steps(trajs: list[Trajectory], H: int) -> int:
+    """Steps every trajectory has after its first ``H`` poses (rollouts are cut to the shortest)."""
+    steps = min(t.num_steps for t in trajs) - H
+    if steps < 1:
+        raise ValueError(f"trajectories need more than {H} poses to evaluate")
+    return steps
 
 
 def _stack(trajs: list[Trajectory], scenes: list[Scene], steps: int, H: int
@@ -199,17 +207,33 @@ def rollout_metrics(sim: LearnedSimulator, trajs: list[Trajectory], scenes: list
     """
     H = sim.config.history + 1
     scenes = scenes or [build_scene(t, sim.config.mesh_options) for t in trajs]
-    steps = min(t.num_steps for t in trajs) - H
-    if steps < 1:
-        raise ValueError(f"trajectories need more than {H} poses to evaluate")
+    steps = _common_steps(trajs, H)
     scene, true = _stack(trajs, scenes, steps, H)
     pred, edges, secs = batched_rollout(sim, scene, true)
     gt = true[H:]
     k = min(horizon, steps) - 1
-    still = true[H - 1][None].expand_as(gt)
     out: dict[str, Any] = {"steps": steps, "horizon_step": k + 1, "seconds": (k + 1) * sim.config.dt,
                            "trajectories": len(trajs), "ms_per_step_batched": 1000 * secs,
                            "collision_edges_per_step": float(np.mean(edges)) / len(trajs)}
+    out.update(final_errors(scene, pred, true, H, k))
+    out.update(one_step_errors(sim, scene, true))
+    out["rotation_gain"] = rotation_gain(scene.dynamic_mask, true[H - 1], pred[k], gt[k])
+    pen_p, pen_t = floor_penetration(scene, pred).mean(), floor_penetration(scene, gt).mean()
+    out["penetration_ratio"] = float(pen_p / pen_t) if pen_t > 0 else math.nan
+    out["penetration_m"] = float(pen_p)
+    return out
+
+
+def final_errors(scene: Scene, pred: Tensor, true: Tensor, H: int, k: int) -> dict[str, Any]:
+    """Errors of a rollout and of the reference models, ``k`` steps after the ``H`` given poses.
+
+    ``pred float[T, O, 7]`` follows ``true float[H + T, O, 7]`` (a batch of scenes). Medians over
+    scenes (``*_final``), per-step median curves, each scene's error, and ratios to the
+    reference models with a bootstrap interval for the ratio to no motion.
+    """
+    gt = true[H:]
+    still = true[H - 1][None].expand_as(gt)
+    out: dict[str, Any] = {}
     per_model = {}
     for name, p in (("", pred), ("still_", still), ("constvel_", constant_velocity(true, H))):
         tr, rot = errors(scene, p, gt)
@@ -219,7 +243,6 @@ def rollout_metrics(sim: LearnedSimulator, trajs: list[Trajectory], scenes: list
         if not name:
             out["translation_rmse_curve"] = tr.median(1).values.tolist()
             out["rotation_deg_curve"] = rot.median(1).values.tolist()
-    out.update(one_step_errors(sim, scene, true))
     for ref in ("still", "constvel"):
         for q in ("translation_rmse", "rotation_deg"):
             denom = out[f"{ref}_{q}_final"]
@@ -228,11 +251,54 @@ def rollout_metrics(sim: LearnedSimulator, trajs: list[Trajectory], scenes: list
         out[f"{q}_ratio_still_ci95"] = median_ratio_interval(per_model[""][i][k].numpy(),
                                                              per_model["still_"][i][k].numpy())
         out[f"{q}_per_trajectory"] = per_model[""][i][k].tolist()
-    out["rotation_gain"] = rotation_gain(scene.dynamic_mask, true[H - 1], pred[k], gt[k])
-    pen_p, pen_t = floor_penetration(scene, pred).mean(), floor_penetration(scene, gt).mean()
-    out["penetration_ratio"] = float(pen_p / pen_t) if pen_t > 0 else math.nan
-    out["penetration_m"] = float(pen_p)
     return out
+
+
+def perturbation_floor(trajs: list[Trajectory], position_noise: float, history: int = 2,
+                       horizon: int = 50, seed: int = 0, mesh_options: MeshOptions | None = None,
+                       ) -> dict[str, Any]:
+    """The rollout errors of MuJoCo itself when its start is off by ``position_noise`` (m).
+
+    Each generated trajectory is re-simulated (:func:`~fignet_gym.data.generate.resimulate`)
+    with every free body moved by ``position_noise`` at the last of the ``history + 1`` poses a
+    learned rollout starts from, and scored like :func:`rollout_metrics` scores a model (same
+    keys). On chaotic data (tosses) this is a floor: a learned simulator is never more exact
+    than its one-step error, so its rollouts cannot beat the floor at that noise.
+    """
+    from fignet_gym.data.generate import resimulate
+
+    H = history + 1
+    steps = _common_steps(trajs, H)
+    scene, true = _stack(trajs, [build_scene(t, mesh_options) for t in trajs], steps, H)
+    pred = torch.cat([torch.as_tensor(resimulate(t, position_noise, H - 1, seed + i)[H:H + steps],
+                                      dtype=torch.float32) for i, t in enumerate(trajs)], 1)
+    k = min(horizon, steps) - 1
+    out: dict[str, Any] = {"position_noise": position_noise, "steps": steps, "horizon_step": k + 1,
+                           "trajectories": len(trajs)}
+    out.update(final_errors(scene, pred, true, H, k))
+    return out
+
+
+def floor_table(data: str, noises: list[float], out: str | None = None, num: int = 32,
+                horizon: int = 50, history: int = 2) -> list[dict[str, Any]]:
+    """Print (and write as JSON to ``out``) :func:`perturbation_floor` at several noise levels."""
+    from fignet_gym.data.format import load_trajectories
+
+    trajs = load_trajectories(data)[:num]
+    rows = [perturbation_floor(trajs, n, history=history, horizon=horizon) for n in noises]
+    print(f"MuJoCo re-run from a start nudged by the noise: {len(trajs)} trajectories of {data}, "
+          f"error at step {rows[0]['horizon_step']} (median; % of no motion)")
+    print(f"{'noise (m)':>10s} {'transl. RMSE (m)':>17s} {'% still':>8s} "
+          f"{'rotation (deg)':>15s} {'% still':>8s}")
+    for r in rows:
+        print(f"{r['position_noise']:10.2g} {r['translation_rmse_final']:17.4f} "
+              f"{100 * r['translation_rmse_ratio_still']:8.1f} {r['rotation_deg_final']:15.2f} "
+              f"{100 * r['rotation_deg_ratio_still']:8.1f}")
+    if out:
+        Path(out).parent.mkdir(parents=True, exist_ok=True)
+        Path(out).write_text(json.dumps({"data": data, "rows": rows}, indent=2))
+        print(f"wrote {out}")
+    return rows
 
 
 def median_ratio_interval(model: np.ndarray, ref: np.ndarray, draws: int = 2000, seed: int = 0

@@ -9,8 +9,9 @@ and writes checkpoints. The model runs on CUDA when available.
 
 A run directory holds ``config.json``, ``last.pt`` (model + optimiser + sampler state, written
 atomically every ``checkpoint_every`` steps and on interruption), ``best.pt`` (lowest validation
-rollout error), ``curve.jsonl`` (one JSON line per validation: step, CPU hours summed over processes, graphs
-seen, errors) and TensorBoard logs. ``--resume`` continues exactly where a killed run stopped.
+rollout error), ``curve.jsonl`` (one JSON line per validation: step, CPU hours of the training
+steps summed over processes (validation and checkpoint writes not counted), graphs seen, errors)
+and TensorBoard logs. ``--resume`` continues exactly where a killed run stopped.
 """
 
 from __future__ import annotations
@@ -551,6 +552,9 @@ class Trainer:
                     self.validate(writer)
                 if lead and st.step % self.cfg.checkpoint_every == 0:
                     self.checkpoint()
+                # The budget is training: validation rollouts (costly for node-based baselines
+                # with many edges) and checkpoint writes are not charged to the next step.
+                t_last, c_last = time.perf_counter(), time.process_time()
             self.check_replicas()
         finally:
             if lead:

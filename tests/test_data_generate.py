@@ -153,3 +153,23 @@ def test_cli_generate_file_metadata_and_bad_kind(tmp_path: Path, capsys) -> None
     assert "seed must be non-negative" in capsys.readouterr().err
     with pytest.raises(ValueError, match="valid: push, toss-simple, toss-complex"):
         gen.default_config("toss")
+
+
+def test_resimulate_replays_and_nudges_only_the_free_bodies() -> None:
+    toss = gen._one(("toss-simple", SHORT_TOSS, 3, 0))
+    push = gen._one(("push", replace(gen.PushConfig(), duration=0.3), 3, 0))
+    for traj in (toss, push):
+        np.testing.assert_allclose(gen.resimulate(traj), traj.poses, atol=1e-9)
+        nudged = gen.resimulate(traj, position_noise=1e-3, at_pose=2, seed=5)
+        np.testing.assert_array_equal(nudged[:2], traj.poses[:2])
+        free = traj.kinds == int(ObjectKind.DYNAMIC)
+        shift = np.linalg.norm(nudged[2, :, :3] - traj.poses[2, :, :3], axis=-1)
+        np.testing.assert_allclose(shift[free], 1e-3, rtol=1e-6)
+        # orientation, the static floor and the pusher's prescribed path are untouched
+        np.testing.assert_allclose(nudged[2, :, 3:], traj.poses[2, :, 3:], atol=1e-12)
+        np.testing.assert_allclose(nudged[:, ~free], traj.poses[:, ~free], atol=1e-9)
+    imported = replace(push, metadata={**push.metadata, "source": "mit-push"})
+    with pytest.raises(ValueError, match="cannot be re-simulated"):
+        gen.resimulate(imported)
+    with pytest.raises(ValueError, match="at_pose"):
+        gen.resimulate(toss, 1e-3, at_pose=toss.num_steps)

@@ -1,14 +1,22 @@
 """Evaluation metrics against reference models whose errors are known by construction."""
 
+import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import torch
 
-from fignet_gym.data.format import build_scene
-from fignet_gym.data.generate import iter_trajectories
-from fignet_gym.evaluation import median_ratio_interval, one_step_errors, rollout_metrics
+from fignet_gym.cli import main
+from fignet_gym.data.format import TrajectoryWriter, build_scene
+from fignet_gym.data.generate import TossConfig, iter_trajectories
+from fignet_gym.evaluation import (
+    median_ratio_interval,
+    one_step_errors,
+    perturbation_floor,
+    rollout_metrics,
+)
 from fignet_gym.geometry import quat_mul
 from fignet_gym.scene import Scene
 from tests.sim_factories import zero_simulator
@@ -132,3 +140,38 @@ def test_evaluate_against_a_second_checkpoint_pairs_the_trajectories(pushes: lis
     assert lo <= ratio <= hi
     with pytest.raises(ValueError, match="same trajectories"):
         paired_ratios(res, {k: v[:1] if k.endswith("per_trajectory") else v for k, v in same.items()})
+
+
+def test_perturbation_floor_of_free_flight_is_the_nudge() -> None:
+    # Tosses whose recorded objects fly freely (second differences exactly g dt^2) for 0.16 s:
+    # ballistic motion carries a position offset unchanged, so MuJoCo's own error is the nudge at
+    # every step, and nothing turns. (Some tosses collide in the air at once: left out.)
+    tosses = []
+    for t in iter_trajectories("toss-simple", 6, seed=4, config=replace(TossConfig(), duration=0.16)):
+        pos = t.poses[:, t.kinds == 0, :3]
+        acc = pos[2:] - 2 * pos[1:-1] + pos[:-2]
+        if np.allclose(acc, [0.0, 0.0, -10.0 * t.dt**2], atol=1e-9):
+            tosses.append(t)
+    assert len(tosses) >= 2
+    res = perturbation_floor(tosses, 2e-3, history=2, horizon=5)
+    assert res["horizon_step"] == 5
+    np.testing.assert_allclose(res["translation_rmse_per_trajectory"], 2e-3, rtol=1e-3)
+    np.testing.assert_allclose(res["translation_rmse_curve"], 2e-3, rtol=1e-3)
+    assert res["rotation_deg_final"] < 1e-3
+    assert res["translation_rmse_ratio_still"] == pytest.approx(2e-3 / res["still_translation_rmse_final"],
+                                                                rel=1e-3)
+    exact = perturbation_floor(tosses, 0.0, horizon=5)
+    assert exact["translation_rmse_final"] < 1e-6 and exact["rotation_deg_final"] < 1e-3
+
+
+def test_floor_command_prints_and_writes_each_noise_level(pushes: list, tmp_path, capsys) -> None:
+    data, out = tmp_path / "p.h5", tmp_path / "floor.json"
+    with TrajectoryWriter(data) as w:
+        for t in pushes:
+            w.add(t)
+    assert main(["floor", "--data", str(data), "--noise", "0", "1e-3", "--horizon", "20",
+                 "--out", str(out)]) == 0
+    rows = json.loads(out.read_text())["rows"]
+    assert [r["position_noise"] for r in rows] == [0.0, 1e-3]
+    assert rows[0]["translation_rmse_final"] < 1e-6 < rows[1]["translation_rmse_final"]
+    assert "MuJoCo re-run" in capsys.readouterr().out

@@ -196,8 +196,12 @@ def tip_position(meta: dict[str, Any], t: float) -> np.ndarray:
     return start + vel * min(t, meta["tip_stop_time"])
 
 
+#: Called before pose ``k`` is recorded; may change the state (see :func:`resimulate`).
+PoseHook = Callable[[int, mujoco.MjModel, mujoco.MjData], None]
+
+
 def simulate_push(mjcf: str, meta: dict[str, Any], num_poses: int, substeps: int,
-                  ) -> tuple[np.ndarray, Scene]:
+                  hook: PoseHook | None = None) -> tuple[np.ndarray, Scene]:
     """Poses ``float[T, O, 7]`` of a push scene, the tip following :func:`tip_position`."""
     model = mujoco.MjModel.from_xml_string(mjcf)
     data = mujoco.MjData(model)
@@ -205,14 +209,15 @@ def simulate_push(mjcf: str, meta: dict[str, Any], num_poses: int, substeps: int
     h = model.opt.timestep
     poses = np.empty((num_poses, scene.num_objects, 7))
     mujoco.mj_forward(model, data)
-    poses[0] = scene.poses_from_data(data)
     step = 0
-    for k in range(1, num_poses):
-        for _ in range(substeps):
+    for k in range(num_poses):
+        for _ in range(substeps if k else 0):
             step += 1
             # the tip is where it should be at the end of the step (an implicit position drive)
             data.mocap_pos[0, :2] = tip_position(meta, step * h)
             mujoco.mj_step(model, data)
+        if hook is not None:
+            hook(k, model, data)
         poses[k] = scene.poses_from_data(data)
     return poses, scene
 
@@ -307,7 +312,8 @@ def _place(objects: list[TossObject], rng: np.random.Generator, cfg: TossConfig,
     return None
 
 
-def simulate_toss(mjcf: str, num_poses: int, substeps: int) -> tuple[np.ndarray, Scene]:
+def simulate_toss(mjcf: str, num_poses: int, substeps: int, hook: PoseHook | None = None,
+                  ) -> tuple[np.ndarray, Scene]:
     """Poses ``float[T, O, 7]`` of a toss scene, from its keyframe ``start``."""
     model = mujoco.MjModel.from_xml_string(mjcf)
     data = mujoco.MjData(model)
@@ -315,11 +321,49 @@ def simulate_toss(mjcf: str, num_poses: int, substeps: int) -> tuple[np.ndarray,
     mujoco.mj_resetDataKeyframe(model, data, 0)
     mujoco.mj_forward(model, data)
     poses = np.empty((num_poses, scene.num_objects, 7))
-    poses[0] = scene.poses_from_data(data)
-    for k in range(1, num_poses):
-        mujoco.mj_step(model, data, nstep=substeps)
+    for k in range(num_poses):
+        if k:
+            mujoco.mj_step(model, data, nstep=substeps)
+        if hook is not None:
+            hook(k, model, data)
         poses[k] = scene.poses_from_data(data)
     return poses, scene
+
+
+def resimulate(traj: Trajectory, position_noise: float = 0.0, at_pose: int = 0, seed: int = 0
+               ) -> np.ndarray:
+    """Re-run a generated trajectory in MuJoCo, optionally nudging its start: ``-> float[T, O, 7]``.
+
+    Before pose ``at_pose`` is recorded, every free body is moved by ``position_noise`` (m) in its
+    own random direction (velocities kept). With no noise this reproduces ``traj.poses`` (to float
+    precision); with some, the spread of the outcomes is the error a perfect simulator makes from
+    a slightly wrong state, a floor under any learned model's rollout error on chaotic data.
+    Only trajectories made by :func:`generate` can be re-run (imported real data has no MJCF).
+    """
+    kind = traj.metadata.get("kind", "")
+    if kind not in KINDS or traj.metadata.get("source") != "fignet_gym.generate":
+        raise ValueError(f"trajectory {traj.name!r} ({kind or 'no kind'}) was not made by "
+                         "fignet_gym.generate, so it cannot be re-simulated")
+    if position_noise < 0 or not 0 <= at_pose < traj.num_steps:
+        raise ValueError(f"need position_noise >= 0 and 0 <= at_pose < {traj.num_steps}, "
+                         f"got {position_noise} and {at_pose}")
+    rng = np.random.default_rng(seed)
+
+    def nudge(k: int, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        if k != at_pose or position_noise == 0:
+            return
+        for j in np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_FREE):
+            d = rng.normal(size=3)
+            adr = model.jnt_qposadr[j]
+            data.qpos[adr:adr + 3] += position_noise * d / np.linalg.norm(d)
+        mujoco.mj_forward(model, data)
+
+    substeps = int(traj.metadata["substeps"])
+    if kind == "push":
+        poses, _ = simulate_push(traj.mjcf, traj.metadata, traj.num_steps, substeps, nudge)
+    else:
+        poses, _ = simulate_toss(traj.mjcf, traj.num_steps, substeps, nudge)
+    return poses
 
 
 def generate_toss(rng: np.random.Generator, cfg: TossConfig, max_attempts: int = 20) -> Trajectory:
@@ -447,6 +491,6 @@ def _jsonable(x: Any) -> Any:
 
 __all__ = [
     "GENERATOR_VERSION", "KINDS", "GenerationError", "PushConfig", "TossConfig", "default_config",
-    "generate", "generate_push", "generate_toss", "iter_trajectories", "simulate_push",
+    "generate", "generate_push", "generate_toss", "iter_trajectories", "resimulate", "simulate_push",
     "simulate_toss", "tip_position",
 ]
