@@ -148,6 +148,17 @@ def test_cli_generate_file_metadata_and_bad_kind(tmp_path: Path, capsys) -> None
         assert f.metadata["kind"] == "toss-simple" and f.metadata["seed"] == 1
         assert f.metadata["config"]["mesh_options"]["sphere_subdivisions"] == 1
         assert f[1].num_steps == 6
+        coarse = f[1].poses
+    # Half the substeps: the same tosses (draws do not depend on the step), stored twice as often
+    fine = tmp_path / "t5.h5"
+    assert _run_cli("generate", "toss-simple", "--num", "2", "--seed", "1", "--out", str(fine),
+                    "--workers", "1", "--duration", "0.1", "--substeps", "5", "--no-progress") == 0
+    with TrajectoryFile(fine) as f:
+        assert f[1].dt == pytest.approx(0.01) and f[1].num_steps == 11
+        np.testing.assert_allclose(f[1].poses[::2], coarse, atol=1e-12)
+    assert _run_cli("generate", "push", "--num", "1", "--out", str(fine), "--substeps", "0",
+                    "--no-progress") == 1
+    assert "--substeps must be at least 1" in capsys.readouterr().err
     assert _run_cli("generate", "push", "--num", "1", "--seed", "-1", "--out", str(out),
                     "--workers", "1", "--no-progress") == 1
     assert "seed must be non-negative" in capsys.readouterr().err

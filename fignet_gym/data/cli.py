@@ -45,6 +45,10 @@ def _generate(args: argparse.Namespace) -> int:
         cfg = replace(cfg, mesh_options=mo)
     if args.duration is not None:
         cfg = replace(cfg, duration=args.duration)
+    if args.substeps is not None:
+        if args.substeps < 1:
+            raise ValueError(f"--substeps must be at least 1, got {args.substeps}")
+        cfg = replace(cfg, substeps=args.substeps)
     stats = generate(args.kind, args.num, args.seed, args.out, workers=args.workers, config=cfg,
                      progress=not args.no_progress)
     print(f"wrote {stats['num']} {args.kind} trajectories to {args.out} in "
@@ -104,6 +108,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="processes (results do not depend on it)")
     g.add_argument("--duration", type=float, default=None,
                    help="seconds per trajectory (default: 1.0 push, 2.0 toss)")
+    g.add_argument("--substeps", type=int, default=None,
+                   help="MuJoCo steps of 2 ms per stored pose (default 10: dt = 0.02 s)")
     g.add_argument("--sphere-subdivisions", type=int, default=1,
                    help="toss: icosphere level of spheres (1: 42 nodes)")
     g.add_argument("--cylinder-sections", type=int, default=12, help="toss: cylinder facets")
