@@ -297,8 +297,30 @@ def floor_table(data: str, noises: list[float], out: str | None = None, num: int
     if out:
         Path(out).parent.mkdir(parents=True, exist_ok=True)
         Path(out).write_text(json.dumps({"data": data, "rows": rows}, indent=2))
-        print(f"wrote {out}")
+        plot_floor(rows, Path(out).with_suffix(".png"), title=Path(data).name)
+        print(f"wrote {out} and {Path(out).with_suffix('.png')}")
     return rows
+
+
+def plot_floor(rows: list[dict[str, Any]], path: Path, title: str = "") -> None:
+    """Errors of :func:`perturbation_floor` (% of no motion) against the start error (log axis)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [r for r in rows if r["position_noise"] > 0]
+    noise = [1000 * r["position_noise"] for r in rows]
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    for q, label in (("translation_rmse", "translation"), ("rotation_deg", "rotation")):
+        ax.plot(noise, [100 * r[f"{q}_ratio_still"] for r in rows], "o-", label=label)
+    ax.set(xscale="log", xlabel="start position error (mm)", ylabel="MuJoCo's error (% of no motion)",
+           title=f"{title}, step {rows[0]['horizon_step']}" if rows else title)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
 
 
 def median_ratio_interval(model: np.ndarray, ref: np.ndarray, draws: int = 2000, seed: int = 0

@@ -175,3 +175,4 @@ def test_floor_command_prints_and_writes_each_noise_level(pushes: list, tmp_path
     assert [r["position_noise"] for r in rows] == [0.0, 1e-3]
     assert rows[0]["translation_rmse_final"] < 1e-6 < rows[1]["translation_rmse_final"]
     assert "MuJoCo re-run" in capsys.readouterr().out
+    assert out.with_suffix(".png").stat().st_size > 0
