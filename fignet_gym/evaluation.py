@@ -260,10 +260,10 @@ def perturbation_floor(trajs: list[Trajectory], position_noise: float, history: 
     """The rollout errors of MuJoCo itself when its start is off by ``position_noise`` (m).
 
     Each generated trajectory is re-simulated (:func:`~fignet_gym.data.generate.resimulate`)
-    with every free body moved by ``position_noise`` at the last of the ``history + 1`` poses a
-    learned rollout starts from, and scored like :func:`rollout_metrics` scores a model (same
-    keys). On chaotic data (tosses) this is a floor: a learned simulator is never more exact
-    than its one-step error, so its rollouts cannot beat the floor at that noise.
+    with every free body moved horizontally by ``position_noise`` at the last of the
+    ``history + 1`` poses a learned rollout starts from, and scored as :func:`rollout_metrics`
+    scores a model (same keys). On chaotic data (tosses) this is a floor: a learned simulator is
+    never more exact than its one-step error, so its rollouts cannot beat the floor at that noise.
     """
     from fignet_gym.data.generate import resimulate
 

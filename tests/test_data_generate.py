@@ -176,6 +176,7 @@ def test_resimulate_replays_and_nudges_only_the_free_bodies() -> None:
         free = traj.kinds == int(ObjectKind.DYNAMIC)
         shift = np.linalg.norm(nudged[2, :, :3] - traj.poses[2, :, :3], axis=-1)
         np.testing.assert_allclose(shift[free], 1e-3, rtol=1e-6)
+        np.testing.assert_allclose(nudged[2, free, 2], traj.poses[2, free, 2], atol=1e-12)
         # orientation, the static floor and the pusher's prescribed path are untouched
         np.testing.assert_allclose(nudged[2, :, 3:], traj.poses[2, :, 3:], atol=1e-12)
         np.testing.assert_allclose(nudged[:, ~free], traj.poses[:, ~free], atol=1e-9)

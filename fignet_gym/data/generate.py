@@ -335,7 +335,8 @@ def resimulate(traj: Trajectory, position_noise: float = 0.0, at_pose: int = 0, 
     """Re-run a generated trajectory in MuJoCo, optionally nudging its start: ``-> float[T, O, 7]``.
 
     Before pose ``at_pose`` is recorded, every free body is moved by ``position_noise`` (m) in its
-    own random direction (velocities kept). With no noise this reproduces ``traj.poses`` (to float
+    own random horizontal direction (horizontal: a body resting on the floor is not driven into
+    it; velocities kept). With no noise this reproduces ``traj.poses`` (to float
     precision); with some, the spread of the outcomes is the error a perfect simulator makes from
     a slightly wrong state, a floor under any learned model's rollout error on chaotic data.
     Only trajectories made by :func:`generate` can be re-run (imported real data has no MJCF).
@@ -353,9 +354,9 @@ def resimulate(traj: Trajectory, position_noise: float = 0.0, at_pose: int = 0, 
         if k != at_pose or position_noise == 0:
             return
         for j in np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_FREE):
-            d = rng.normal(size=3)
+            angle = rng.uniform(0.0, 2.0 * np.pi)
             adr = model.jnt_qposadr[j]
-            data.qpos[adr:adr + 3] += position_noise * d / np.linalg.norm(d)
+            data.qpos[adr:adr + 2] += position_noise * np.array([np.cos(angle), np.sin(angle)])
         mujoco.mj_forward(model, data)
 
     substeps = int(traj.metadata["substeps"])
