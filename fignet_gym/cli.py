@@ -99,7 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "(how chaotic the data is: a floor under learned rollouts)")
     f.add_argument("--data", required=True, help="generated trajectories (HDF5)")
     f.add_argument("--noise", type=float, nargs="+", default=[1e-4, 1e-3, 1e-2],
-                   help="start position errors (m) of every free body")
+                   help="start position errors (m): every free body moved horizontally")
     f.add_argument("--num", type=int, default=32, help="trajectories to re-simulate")
     f.add_argument("--horizon", type=int, default=50, help="step at which errors are reported")
     f.add_argument("--history", type=int, default=2, help="velocities a learned rollout is given "

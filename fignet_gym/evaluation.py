@@ -262,8 +262,9 @@ def perturbation_floor(trajs: list[Trajectory], position_noise: float, history: 
     Each generated trajectory is re-simulated (:func:`~fignet_gym.data.generate.resimulate`)
     with every free body moved horizontally by ``position_noise`` at the last of the
     ``history + 1`` poses a learned rollout starts from, and scored as :func:`rollout_metrics`
-    scores a model (same keys). On chaotic data (tosses) this is a floor: a learned simulator is
-    never more exact than its one-step error, so its rollouts cannot beat the floor at that noise.
+    scores a model (same keys). On chaotic data (tosses) this is a floor: a learned simulator
+    whose state is off by ``position_noise`` after one step is at best a perfect simulator
+    started that far off, so its rollouts are not expected to beat these errors.
     """
     from fignet_gym.data.generate import resimulate
 
