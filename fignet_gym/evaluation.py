@@ -38,7 +38,7 @@ from fignet_gym.geometry import (
     quat_normalize,
     quat_to_axis_angle,
 )
-from fignet_gym.scene import MeshOptions, Scene
+from fignet_gym.scene import Scene
 from fignet_gym.simulator import LearnedSimulator
 
 
@@ -255,8 +255,7 @@ def final_errors(scene: Scene, pred: Tensor, true: Tensor, H: int, k: int) -> di
 
 
 def perturbation_floor(trajs: list[Trajectory], position_noise: float, history: int = 2,
-                       horizon: int = 50, seed: int = 0, mesh_options: MeshOptions | None = None,
-                       ) -> dict[str, Any]:
+                       horizon: int = 50, seed: int = 0) -> dict[str, Any]:
     """The rollout errors of MuJoCo itself when its start is off by ``position_noise`` (m).
 
     Each generated trajectory is re-simulated (:func:`~fignet_gym.data.generate.resimulate`)
@@ -270,7 +269,7 @@ def perturbation_floor(trajs: list[Trajectory], position_noise: float, history: 
 
     H = history + 1
     steps = _common_steps(trajs, H)
-    scene, true = _stack(trajs, [build_scene(t, mesh_options) for t in trajs], steps, H)
+    scene, true = _stack(trajs, [build_scene(t) for t in trajs], steps, H)
     pred = torch.cat([torch.as_tensor(resimulate(t, position_noise, H - 1, seed + i)[H:H + steps],
                                       dtype=torch.float32) for i, t in enumerate(trajs)], 1)
     k = min(horizon, steps) - 1

@@ -519,10 +519,12 @@ class Trainer:
         st = self.state
         bar = tqdm(total=self.cfg.steps, initial=st.step, desc="train", unit="step",
                    dynamic_ncols=True, disable=not lead)
-        t_last, c_last = time.perf_counter(), time.process_time()
         end = self.cfg.steps if stop_after is None else min(self.cfg.steps, st.step + stop_after)
         try:
             while st.step < end and not stop["flag"]:
+                # The budget is the training step itself: validation rollouts (costly for
+                # node-based baselines with many edges) and checkpoint writes are not charged.
+                t_start, c_start = time.perf_counter(), time.process_time()
                 self.sim.train()
                 scene, poses = self.batch()
                 loss = self.loss(scene, poses)
@@ -539,9 +541,8 @@ class Trainer:
                 st.graphs_seen += self.cfg.batch_size * self.world
                 now, cnow = time.perf_counter(), time.process_time()
                 # Every process does the same work, so the run's CPU time is world x this one's.
-                st.cpu_seconds += (cnow - c_last) * self.world
-                gps = self.cfg.batch_size * self.world / max(now - t_last, 1e-9)
-                t_last, c_last = now, cnow
+                st.cpu_seconds += (cnow - c_start) * self.world
+                gps = self.cfg.batch_size * self.world / max(now - t_start, 1e-9)
                 bar.update(1)
                 if lead and st.step % 20 == 0:
                     bar.set_postfix(loss=f"{loss.item():.3g}", gps=f"{gps:.1f}")
@@ -552,9 +553,6 @@ class Trainer:
                     self.validate(writer)
                 if lead and st.step % self.cfg.checkpoint_every == 0:
                     self.checkpoint()
-                # The budget is training: validation rollouts (costly for node-based baselines
-                # with many edges) and checkpoint writes are not charged to the next step.
-                t_last, c_last = time.perf_counter(), time.process_time()
             self.check_replicas()
         finally:
             if lead:

@@ -211,7 +211,7 @@ def simulate_push(mjcf: str, meta: dict[str, Any], num_poses: int, substeps: int
     mujoco.mj_forward(model, data)
     step = 0
     for k in range(num_poses):
-        for _ in range(substeps if k else 0):
+        for _ in range(substeps if k else 0):  # pose 0 is the initial state
             step += 1
             # the tip is where it should be at the end of the step (an implicit position drive)
             data.mocap_pos[0, :2] = tip_position(meta, step * h)
