@@ -1,29 +1,29 @@
 """Gymnasium environments whose dynamics swap between MuJoCo and FIGNet.
 
-Installed as ``fignet_gym.envs``.
-
-Importing this package registers ``fignet_gym/Push-v0`` and ``fignet_gym/Toss-v0``::
+Installed as ``fignet_gym.envs``. The ids are registered when Gymnasium is imported (by
+:mod:`fignet_gym.registration`), so ``import fignet_gym`` is enough::
 
     import gymnasium as gym
-    import fignet_gym.envs  # noqa: F401  (registers the environments)
+    import fignet_gym  # noqa: F401  (registers the environments)
 
-    env = gym.make("fignet_gym/Push-v0", dynamics="fignet", checkpoint="push.pt",
-                   render_mode="rgb_array")
+    env = gym.make("fignet_gym/Push-v0", dynamics="fignet", render_mode="rgb_array")
     venv = gym.make_vec("fignet_gym/Push-v0", num_envs=16, vectorization_mode="vector_entry_point",
-                        dynamics="fignet", checkpoint="push.pt")
+                        dynamics="fignet", checkpoint="push")
 
-``gym.make("fignet_gym.envs:fignet_gym/Push-v0")`` imports and registers in one go.
+The stable-baselines3 adapter lives in :mod:`fignet_gym.envs.sb3` and is imported (with SB3) only
+when one of its names is used.
 """
 
-import gymnasium as gym
+from typing import Any
 
 from fignet_gym.envs.base import MjDynamicsEnv
 from fignet_gym.envs.push import PushEnv, PushVectorEnv
-from fignet_gym.envs.sb3 import SB3VecEnvAdapter, make_sb3_vec_env
 from fignet_gym.envs.toss import TossEnv, TossVectorEnv
 from fignet_gym.envs.vector import BatchedVectorEnv
+from fignet_gym.registration import ENV_IDS, register_envs
 
 __all__ = [
+    "ENV_IDS",
     "BatchedVectorEnv",
     "MjDynamicsEnv",
     "PushEnv",
@@ -35,30 +35,15 @@ __all__ = [
     "register_envs",
 ]
 
-#: Registered ids and their episode limits (Toss ends by itself once every object is released).
-ENV_IDS = {"fignet_gym/Push-v0": 50, "fignet_gym/Toss-v0": None}
-
-
-def register_envs() -> None:
-    """Register ``fignet_gym/Push-v0`` and ``fignet_gym/Toss-v0`` with Gymnasium (idempotent)."""
-    specs = {
-        "fignet_gym/Push-v0": (
-            "fignet_gym.envs.push:PushEnv",
-            "fignet_gym.envs.push:PushVectorEnv",
-        ),
-        "fignet_gym/Toss-v0": (
-            "fignet_gym.envs.toss:TossEnv",
-            "fignet_gym.envs.toss:TossVectorEnv",
-        ),
-    }
-    for env_id, (entry, vector_entry) in specs.items():
-        if env_id not in gym.registry:
-            gym.register(
-                id=env_id,
-                entry_point=entry,
-                vector_entry_point=vector_entry,
-                max_episode_steps=ENV_IDS[env_id],
-            )
-
-
 register_envs()
+
+_SB3_NAMES = ("SB3VecEnvAdapter", "make_sb3_vec_env")
+
+
+def __getattr__(name: str) -> Any:
+    # stable-baselines3 costs seconds to import: only users of its adapter pay for it.
+    if name in _SB3_NAMES:
+        from fignet_gym.envs import sb3
+
+        return getattr(sb3, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,4 +1,9 @@
-"""fignet_gym: FIGNet, a learned rigid-body simulator, as a drop-in replacement for MuJoCo."""
+"""fignet_gym: FIGNet, a learned rigid-body simulator, as a drop-in replacement for MuJoCo.
+
+Importing the package loads the simulator core (torch, MuJoCo's model reader) and no RL stack; the
+environment ids (``fignet_gym/Push-v0``, ...) are registered with Gymnasium as soon as it is
+imported (:mod:`fignet_gym.registration`). Package layout: ``docs/architecture.md``.
+"""
 
 import os as _os
 
@@ -7,18 +12,24 @@ import os as _os
 if not (_os.environ.get("DISPLAY") or _os.environ.get("WAYLAND_DISPLAY")):
     _os.environ.setdefault("MUJOCO_GL", "egl")
 
-from fignet_gym.geometry import ShapeMatchError
-from fignet_gym.pretrained_models import available_pretrained, load_pretrained
-from fignet_gym.scene import MeshOptions, ObjectKind, Scene, UnsupportedSceneError
-from fignet_gym.simulator import CheckpointError, LearnedSimulator, SimulatorConfig
+from fignet_gym.pretrained import available_pretrained, load_checkpoint, load_pretrained  # noqa: E402
+from fignet_gym.registration import register_when_gymnasium_loads  # noqa: E402
+from fignet_gym.simulator import (  # noqa: E402
+    CheckpointError,
+    LearnedSimulator,
+    MeshOptions,
+    ObjectKind,
+    Scene,
+    ShapeMatchError,
+    SimulatorConfig,
+    UnsupportedSceneError,
+)
 
 __all__ = [
     "CheckpointError", "LearnedSimulator", "MeshOptions", "ObjectKind", "Scene",
     "ShapeMatchError", "SimulatorConfig", "UnsupportedSceneError", "available_pretrained",
-    "load_pretrained",
+    "load_checkpoint", "load_pretrained",
 ]
 __version__ = "0.1.0"
 
-# Registers fignet_gym/Push-v0 and fignet_gym/Toss-v0 with Gymnasium (whose 1.x releases do not load
-# the package's entry point by themselves).
-import fignet_gym.envs  # noqa: E402, F401
+register_when_gymnasium_loads()

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 
 
 def _train(args: argparse.Namespace) -> int:
-    from fignet_gym.training import train_from_files
+    from fignet_gym.train.training import train_from_files
 
     overrides = dict(json.loads(args.set)) if args.set else {}
     train_from_files(args.data, args.valid, args.config, args.out, resume=args.resume,
@@ -18,7 +18,7 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from fignet_gym.evaluation import evaluate
+    from fignet_gym.train.evaluation import evaluate
 
     evaluate(args.checkpoint, args.data, args.out, num=args.num, horizon=args.horizon,
              videos=args.videos, against=args.against)
@@ -26,7 +26,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _floor(args: argparse.Namespace) -> int:
-    from fignet_gym.evaluation import floor_table
+    from fignet_gym.train.evaluation import floor_table
 
     floor_table(args.data, args.noise, out=args.out, num=args.num, horizon=args.horizon,
                 history=args.history)
@@ -34,21 +34,21 @@ def _floor(args: argparse.Namespace) -> int:
 
 
 def _ship(args: argparse.Namespace) -> int:
-    from fignet_gym.ship import ship
+    from fignet_gym.train.ship import ship
 
     ship(args.run, args.name, args.data, args.horizon, num=args.num, dest=args.dest, notes=args.notes)
     return 0
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from fignet_gym.bench import run
+    from fignet_gym.tools.bench import run
 
     run(args)
     return 0
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from fignet_gym.demo import run_demo
+    from fignet_gym.tools.demo import run_demo
 
     run_demo(args.out, quick=args.quick)
     return 0
@@ -56,8 +56,8 @@ def _demo(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The full ``fignet-gym`` argument parser."""
-    from fignet_gym.bench import add_arguments as bench_args
     from fignet_gym.data.cli import register as register_data
+    from fignet_gym.tools.bench import add_arguments as bench_args
 
     p = argparse.ArgumentParser(prog="fignet-gym", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)

@@ -1,7 +1,7 @@
 """MJCF builders for the push and toss scenes (MIT Pushing objects, MOVi-like tossed shapes).
 
 Every builder returns an XML string for ``mujoco.MjModel.from_xml_string``. The world body holds
-a finite floor plane (object 0 of :meth:`fignet_gym.scene.Scene.from_mjmodel`); then come the
+a finite floor plane (object 0 of :meth:`fignet_gym.simulator.scene.Scene.from_mjmodel`); then come the
 bodies in document order, so a scene's object order is: floor, then the bodies as listed here.
 
 Geometry choices (why):
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from fignet_gym.scene import MeshOptions, restitution_to_dampratio
+from fignet_gym.simulator.scene import MeshOptions, restitution_to_dampratio
 
 # --------------------------------------------------------------------------- MIT Pushing objects
 

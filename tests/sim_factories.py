@@ -2,7 +2,7 @@
 
 import torch
 
-from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
+from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
 
 SMALL = dict(dt=0.02, latent_size=16, message_passing_steps=2)
 

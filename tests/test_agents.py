@@ -30,7 +30,7 @@ from fignet_gym.agents import (
 )
 from fignet_gym.dynamics import DivergenceError, DynamicsBase, FIGNetDynamics, MujocoDynamics
 from fignet_gym.mjcf import push_object
-from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
+from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
 
 PUSH = "fignet_gym/Push-v0"
 #: Tiny planners: the machine is shared, tests must stay fast.

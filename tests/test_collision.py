@@ -12,7 +12,7 @@ import trimesh
 from scipy.spatial.transform import Rotation
 from torch import Tensor
 
-from fignet_gym.collision import FaceContacts, find_face_contacts, triangle_closest_points
+from fignet_gym.simulator.collision import FaceContacts, find_face_contacts, triangle_closest_points
 
 # Faces of a triangle as vertex subsets: 3 vertices, 3 edges, the interior.
 _SUBSETS = [(0,), (1,), (2,), (0, 1), (1, 2), (0, 2), (0, 1, 2)]

@@ -19,7 +19,7 @@ from fignet_gym.data.format import (
     write_trajectories,
 )
 from fignet_gym.mjcf import push_scene_xml
-from fignet_gym.scene import ObjectKind
+from fignet_gym.simulator.scene import ObjectKind
 
 
 def _push_traj(name: str = "p0", steps: int = 4, shift: float = 0.0) -> Trajectory:

@@ -14,7 +14,7 @@ from fignet_gym.data import generate as gen
 from fignet_gym.data.cli import register
 from fignet_gym.data.format import INCOMPLETE_SUFFIX, TrajectoryFile, load_trajectories
 from fignet_gym.mjcf import MATERIALS, MIT_OBJECTS
-from fignet_gym.scene import ObjectKind
+from fignet_gym.simulator.scene import ObjectKind
 
 SHORT_TOSS = replace(gen.TossConfig(), duration=0.3)
 

@@ -25,7 +25,7 @@ from fignet_gym.data.importers import (
     read_movi_json,
 )
 from fignet_gym.mjcf import MIT_OBJECTS
-from fignet_gym.scene import ObjectKind
+from fignet_gym.simulator.scene import ObjectKind
 
 RAW = "motion_surface={surface}_shape={shape}_a={a}_v=20_i=0.000_s=0.500_t=0.349{ext}"
 

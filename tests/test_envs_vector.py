@@ -12,7 +12,7 @@ from sim_factories import quiet_simulator
 
 import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.envs import BatchedVectorEnv, SB3VecEnvAdapter, make_sb3_vec_env
-from fignet_gym.simulator import LearnedSimulator
+from fignet_gym.simulator.model import LearnedSimulator
 
 ENV_IDS = ["fignet_gym/Push-v0", "fignet_gym/Toss-v0"]
 FAST = {"fignet_gym/Push-v0": {}, "fignet_gym/Toss-v0": {"settle_steps": 3}}

@@ -11,14 +11,14 @@ import torch
 from fignet_gym.cli import main
 from fignet_gym.data.format import TrajectoryWriter, build_scene
 from fignet_gym.data.generate import TossConfig, iter_trajectories
-from fignet_gym.evaluation import (
+from fignet_gym.simulator.geometry import quat_mul
+from fignet_gym.simulator.scene import Scene
+from fignet_gym.train.evaluation import (
     median_ratio_interval,
     one_step_errors,
     perturbation_floor,
     rollout_metrics,
 )
-from fignet_gym.geometry import quat_mul
-from fignet_gym.scene import Scene
 from tests.sim_factories import zero_simulator
 
 
@@ -65,7 +65,7 @@ def test_median_ratio_interval_brackets_known_ratios() -> None:
 
 
 def test_rotation_gain_hand_cases() -> None:
-    from fignet_gym.evaluation import rotation_gain
+    from fignet_gym.train.evaluation import rotation_gain
 
     def about(axis: int, deg: float) -> torch.Tensor:  # pose at the origin, turned about an axis
         q = torch.zeros(7)
@@ -84,7 +84,7 @@ def test_rotation_gain_hand_cases() -> None:
 
 
 def test_spin_change_hand_case() -> None:
-    from fignet_gym.evaluation import spin_change
+    from fignet_gym.train.evaluation import spin_change
 
     def about_z(rad: float) -> torch.Tensor:
         return torch.tensor([[math.cos(rad / 2), 0.0, 0.0, math.sin(rad / 2)]], dtype=torch.float64)
@@ -102,7 +102,7 @@ def test_free_flight_error_hand_case() -> None:
     # Tosses start in the air. A zero network with the gravity prior predicts exactly g dt^2 for
     # every node, so its free-flight error is 0; shifting its output by half of g dt^2 (through
     # the target normaliser's mean) makes it exactly 0.5.
-    from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
+    from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
     from tests.sim_factories import SMALL
 
     trajs = list(iter_trajectories("toss-simple", 2, seed=3))
@@ -122,7 +122,7 @@ def test_free_flight_error_hand_case() -> None:
 
 def test_evaluate_against_a_second_checkpoint_pairs_the_trajectories(pushes: list, tmp_path) -> None:
     from fignet_gym.data.format import write_trajectories
-    from fignet_gym.evaluation import evaluate, paired_ratios
+    from fignet_gym.train.evaluation import evaluate, paired_ratios
     from tests.sim_factories import quiet_simulator
 
     data = tmp_path / "pushes.h5"

@@ -5,7 +5,7 @@ import math
 import pytest
 import torch
 
-from fignet_gym.geometry import (
+from fignet_gym.simulator.geometry import (
     ShapeMatchError,
     axis_angle_to_quat,
     barycentric,

@@ -17,7 +17,7 @@ from fignet_gym.mjcf import (
     toss_scene_xml,
     unit_shape_mesh,
 )
-from fignet_gym.scene import MeshOptions, ObjectKind, Scene
+from fignet_gym.simulator.scene import MeshOptions, ObjectKind, Scene
 
 
 def _inertia_matrix(model: mujoco.MjModel, body: int) -> np.ndarray:

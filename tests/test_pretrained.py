@@ -5,7 +5,7 @@ import json
 import pytest
 
 from fignet_gym import CheckpointError, available_pretrained, load_pretrained
-from fignet_gym.pretrained_models import pretrained_dir, pretrained_path
+from fignet_gym.pretrained import pretrained_dir, pretrained_path
 
 
 def test_shipped_models_load_offline_with_model_cards() -> None:
@@ -21,7 +21,7 @@ def test_shipped_models_load_offline_with_model_cards() -> None:
 
 @pytest.mark.parametrize("preset, name", [("push-finetune", "push"), ("toss-cpu", "toss")])
 def test_presets_are_the_shipped_models_recipes(preset: str, name: str) -> None:
-    from fignet_gym.training import PRESETS
+    from fignet_gym.train.training import PRESETS
 
     shipped = load_pretrained(name).config.to_dict()
     for key, value in PRESETS[preset]["simulator"].items():
@@ -37,7 +37,7 @@ def test_unknown_pretrained_name_lists_the_available_ones() -> None:
 
 
 def test_demo_quick_run_writes_its_summary(tmp_path) -> None:
-    from fignet_gym.demo import run_demo
+    from fignet_gym.tools.demo import run_demo
 
     summary = run_demo(str(tmp_path), quick=True)
     saved = json.loads((tmp_path / "summary.json").read_text())

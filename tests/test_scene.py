@@ -6,7 +6,7 @@ import pytest
 import torch
 import trimesh
 
-from fignet_gym.scene import (
+from fignet_gym.simulator.scene import (
     MeshOptions,
     ObjectKind,
     Scene,

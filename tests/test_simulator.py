@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import torch
 
-from fignet_gym.collision import FaceContacts
-from fignet_gym.geometry import rigid_projection
-from fignet_gym.graph import face_edge_features
-from fignet_gym.scene import Scene
-from fignet_gym.simulator import CheckpointError, LearnedSimulator, SimulatorConfig
+from fignet_gym.simulator.collision import FaceContacts
+from fignet_gym.simulator.geometry import rigid_projection
+from fignet_gym.simulator.graph import face_edge_features
+from fignet_gym.simulator.model import CheckpointError, LearnedSimulator, SimulatorConfig
+from fignet_gym.simulator.scene import Scene
 
 SMALL = SimulatorConfig(latent_size=16, message_passing_steps=2, collision_radius=0.03)
 
@@ -214,7 +214,7 @@ def test_overfits_one_short_mujoco_trajectory(push_like_xml: str) -> None:
 
 
 def test_clip_length_hand_case() -> None:
-    from fignet_gym.graph import clip_length
+    from fignet_gym.simulator.graph import clip_length
 
     d = torch.tensor([[3.0, 4.0, 0.0], [0.3, 0.4, 0.0], [0.0, 0.0, 0.0]])
     out = clip_length(d, 1.0)
@@ -256,7 +256,7 @@ def test_last_block_has_no_dead_weights_and_old_checkpoints_load(tmp_path, push_
 ])
 def test_warm_start_onto_new_face_features_keeps_the_function(push_like_xml: str, before: dict,
                                                               after: dict) -> None:
-    from fignet_gym.training import warm_start
+    from fignet_gym.train.training import warm_start
 
     source = LearnedSimulator(replace(SMALL, **before)).eval()
     randomize_normalizers(source, push_like_xml)
@@ -298,7 +298,7 @@ def test_contact_lever_is_the_receiver_point_from_its_objects_centre_of_mass(pus
 
 
 def test_rigid_training_noise_has_the_configured_scales(push_like_xml: str) -> None:
-    from fignet_gym.geometry import quat_conj, quat_mul, quat_to_axis_angle
+    from fignet_gym.simulator.geometry import quat_conj, quat_mul, quat_to_axis_angle
 
     scene, hist = scene_and_history(push_like_xml)
     gen = torch.Generator().manual_seed(0)

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import torch
 
-from fignet_gym import training
 from fignet_gym.data.format import load_trajectories, write_trajectories
 from fignet_gym.data.generate import iter_trajectories
-from fignet_gym.training import TrainConfig, Trainer, load_run_config, rotate_about_z
+from fignet_gym.train import training
+from fignet_gym.train.training import TrainConfig, Trainer, load_run_config, rotate_about_z
 
 TINY = {"simulator.latent_size": 8, "simulator.message_passing_steps": 1,
         "training.batch_size": 2, "training.steps": 6, "training.valid_every": 100,
@@ -131,7 +131,7 @@ def test_pushforward_waits_for_unroll_after(push_file: Path, tmp_path: Path) -> 
 
 def test_sampler_weights_still_windows_near_motion_above_other_still_windows(push_file: Path) -> None:
     from fignet_gym.data.format import build_scene
-    from fignet_gym.training import WindowSampler
+    from fignet_gym.train.training import WindowSampler
 
     traj = load_trajectories(push_file)[0]
     scene = build_scene(traj)

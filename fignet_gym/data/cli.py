@@ -35,7 +35,7 @@ def _generate(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from fignet_gym.data.generate import TossConfig, default_config, generate
-    from fignet_gym.scene import MeshOptions
+    from fignet_gym.simulator.scene import MeshOptions
 
     cfg = default_config(args.kind)
     if isinstance(cfg, TossConfig):

@@ -36,7 +36,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from fignet_gym.scene import MeshOptions, ObjectKind, Scene
+from fignet_gym.simulator.scene import MeshOptions, ObjectKind, Scene
 
 FORMAT_NAME = "fignet_gym.trajectories"
 FORMAT_VERSION = 1

@@ -33,7 +33,7 @@ from fignet_gym.mjcf import (
     toss_scene_xml,
     unit_shape_mesh,
 )
-from fignet_gym.scene import MeshOptions, Scene
+from fignet_gym.simulator.scene import MeshOptions, Scene
 
 GENERATOR_VERSION = "1"
 KINDS = ("push", "toss-simple", "toss-complex")

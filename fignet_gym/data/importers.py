@@ -34,7 +34,7 @@ from fignet_gym.data.format import (
     TrajectoryWriter,
 )
 from fignet_gym.mjcf import MIT_OBJECTS, push_scene_xml, yaw_quat
-from fignet_gym.scene import ObjectKind, Scene
+from fignet_gym.simulator.scene import ObjectKind, Scene
 
 IMPORTER_VERSION = "1"
 #: Sample rate of the pdproc files (Hz).

@@ -26,7 +26,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from fignet_gym.data.format import Trajectory  # noqa: E402
-from fignet_gym.scene import ObjectKind, Scene  # noqa: E402
+from fignet_gym.simulator.scene import ObjectKind, Scene  # noqa: E402
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,6 @@
 """Benchmark of the Push and Toss environments with MuJoCo and learned dynamics.
 
-``python -m fignet_gym.bench_envs [--envs push toss] [--nums 1 16 64] [--seconds 3] [--threads 1]``
+``python -m fignet_gym.tools.bench_envs [--envs push toss] [--nums 1 16 64] [--seconds 3] [--threads 1]``
 
 For each environment and dynamics it reports environment steps per second of a single environment
 (``gym.make``) and of the batched vector environment at each ``N`` (``gym.make_vec(...,
@@ -47,12 +47,12 @@ class Row:
 
 def learned_model(kind: str, checkpoint: str | None) -> tuple[Any, str]:
     """The simulator to benchmark for ``kind`` and a description of where it came from."""
-    from fignet_gym.pretrained_models import available_pretrained, load_pretrained
-    from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
-    from fignet_gym.training import PRESETS
+    from fignet_gym.pretrained import available_pretrained, load_checkpoint, load_pretrained
+    from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
+    from fignet_gym.train.training import PRESETS
 
     if checkpoint:
-        return LearnedSimulator.load(checkpoint), f"checkpoint {checkpoint}"
+        return load_checkpoint(checkpoint), f"checkpoint {checkpoint}"
     if kind in available_pretrained():
         return load_pretrained(kind), f"pretrained '{kind}'"
     cfg = SimulatorConfig.from_dict(PRESETS[f"{kind}-cpu"]["simulator"])

@@ -11,9 +11,9 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from fignet_gym.collision import FaceContacts
-from fignet_gym.geometry import barycentric
-from fignet_gym.scene import ObjectKind, Scene
+from fignet_gym.simulator.collision import FaceContacts
+from fignet_gym.simulator.geometry import barycentric
+from fignet_gym.simulator.scene import ObjectKind, Scene
 
 
 @dataclass(frozen=True)

@@ -23,8 +23,8 @@ import numpy as np
 import torch
 
 from fignet_gym.mjcf import TossObject, push_scene_xml, toss_scene_xml
-from fignet_gym.scene import MeshOptions, Scene
-from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
+from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
+from fignet_gym.simulator.scene import MeshOptions, Scene
 
 
 @dataclass

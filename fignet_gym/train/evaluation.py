@@ -30,7 +30,7 @@ import torch
 from torch import Tensor
 
 from fignet_gym.data.format import Trajectory, build_scene
-from fignet_gym.geometry import (
+from fignet_gym.simulator.geometry import (
     axis_angle_to_quat,
     quat_angle,
     quat_conj,
@@ -38,8 +38,8 @@ from fignet_gym.geometry import (
     quat_normalize,
     quat_to_axis_angle,
 )
-from fignet_gym.scene import Scene
-from fignet_gym.simulator import LearnedSimulator
+from fignet_gym.simulator.model import LearnedSimulator
+from fignet_gym.simulator.scene import Scene
 
 
 def _common_steps(trajs: list[Trajectory], H: int) -> int:
@@ -360,16 +360,16 @@ def evaluate(checkpoint: str, data: str, out: str, num: int = 32, horizon: int =
     models' median errors, with bootstrap intervals, are printed and stored under ``"against"``.
     """
     from fignet_gym.data.format import load_trajectories
-    from fignet_gym.pretrained_models import resolve_checkpoint
+    from fignet_gym.pretrained import load_checkpoint
 
-    sim = LearnedSimulator.load(resolve_checkpoint(checkpoint))
+    sim = load_checkpoint(checkpoint)
     trajs = load_trajectories(data)[:num]
     outdir = Path(out)
     outdir.mkdir(parents=True, exist_ok=True)
     res = rollout_metrics(sim, trajs, horizon=horizon)
     res.update(checkpoint=str(checkpoint), data=str(data))
     if against is not None:
-        ref = rollout_metrics(LearnedSimulator.load(resolve_checkpoint(against)), trajs, horizon=horizon)
+        ref = rollout_metrics(load_checkpoint(against), trajs, horizon=horizon)
         res["against"] = {"checkpoint": str(against), "translation_rmse_final": ref["translation_rmse_final"],
                           "rotation_deg_final": ref["rotation_deg_final"], "ratios": paired_ratios(res, ref)}
     (outdir / "metrics.json").write_text(json.dumps(res, indent=2))

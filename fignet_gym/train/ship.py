@@ -13,10 +13,10 @@ from pathlib import Path
 from typing import Any
 
 from fignet_gym.data.format import build_scene, load_trajectories
-from fignet_gym.evaluation import rollout_metrics
-from fignet_gym.pretrained_models import pretrained_dir
-from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
-from fignet_gym.training import median_node_acceleration
+from fignet_gym.pretrained import pretrained_dir
+from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
+from fignet_gym.train.evaluation import rollout_metrics
+from fignet_gym.train.training import median_node_acceleration
 
 
 def ship(run: str, name: str, data: str, horizon: int, num: int = 64, dest: str | None = None,

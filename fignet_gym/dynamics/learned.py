@@ -14,14 +14,15 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from fignet_gym.dynamics import (
+from fignet_gym.dynamics.base import (
     STATE_SPEC,
     DivergenceError,
     DynamicsBase,
-    _check_rollout_inputs,
-    _set_mocap,
+    check_rollout_inputs,
+    set_mocap,
 )
-from fignet_gym.geometry import (
+from fignet_gym.pretrained import load_checkpoint
+from fignet_gym.simulator.geometry import (
     ShapeMatchError,
     axis_angle_to_quat,
     quat_conj,
@@ -29,8 +30,8 @@ from fignet_gym.geometry import (
     quat_normalize,
     quat_to_axis_angle,
 )
-from fignet_gym.scene import ObjectKind, Scene
-from fignet_gym.simulator import LearnedSimulator
+from fignet_gym.simulator.model import LearnedSimulator
+from fignet_gym.simulator.scene import ObjectKind, Scene
 
 
 @dataclass
@@ -103,18 +104,7 @@ class FIGNetDynamics(DynamicsBase):
         max_speed: float = 100.0,
         device: str | torch.device | None = None,
     ) -> None:
-        from fignet_gym.simulator import LearnedSimulator
-
-        if isinstance(checkpoint, (str, os.PathLike)):
-            from fignet_gym.pretrained_models import resolve_checkpoint
-
-            sim = LearnedSimulator.load(resolve_checkpoint(str(checkpoint)), map_location=device or "cpu")
-        elif isinstance(checkpoint, LearnedSimulator):
-            sim = checkpoint.to(device) if device is not None else checkpoint
-        else:
-            raise TypeError(
-                f"checkpoint must be a path or a LearnedSimulator, got {type(checkpoint).__name__}"
-            )
+        sim = load_checkpoint(checkpoint, map_location=device)
         self.simulator = sim.eval()
         self.max_distance = float(max_distance)
         self.fall_depth = float(fall_depth)
@@ -416,7 +406,7 @@ class FIGNetDynamics(DynamicsBase):
         Returns:
             ``float64[B, nstep, nstate]``; a rollout that diverges is NaN from that step on.
         """
-        state, control, nstep = _check_rollout_inputs(model, initial_state, control, nstep)
+        state, control, nstep = check_rollout_inputs(model, initial_state, control, nstep)
         nlearn = self.learned_steps(model, frame_skip)
         info = self._scene_info(model)
         B, nstate = state.shape
@@ -424,7 +414,7 @@ class FIGNetDynamics(DynamicsBase):
         hists, times = [], []
         for b in range(B):
             mujoco.mj_setState(model, scratch, state[b], STATE_SPEC)
-            _set_mocap(model, scratch, control[b, 0])
+            set_mocap(model, scratch, control[b, 0])
             scratch.xquat[:] = 0.0  # mocap bodies start at control[:, 0]
             hists.append(self._seed(info, scratch, None, None))
             times.append(float(scratch.time))

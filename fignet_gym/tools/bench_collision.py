@@ -1,6 +1,6 @@
-"""Micro-benchmark of :func:`fignet_gym.collision.find_face_contacts` on two typical scenes.
+"""Micro-benchmark of :func:`fignet_gym.simulator.collision.find_face_contacts` on two typical scenes.
 
-``python -m fignet_gym.bench_collision [--radii 0.005 0.01 0.02] [--repeats 100] [--threads 1]``
+``python -m fignet_gym.tools.bench_collision [--radii 0.005 0.01 0.02] [--repeats 100] [--threads 1]``
 
 * ``pile``: 6 objects of 60 nodes (116 faces) each, in a 3 x 2 block resting on a 2-triangle
   floor, each touching (1 mm overlap) its neighbours: 8 cm objects, so ``d_c = 0.01`` is 12 %;
@@ -21,8 +21,8 @@ import numpy as np
 import torch
 import trimesh
 
-from fignet_gym.collision import find_face_contacts
-from fignet_gym.scene import Scene
+from fignet_gym.simulator.collision import find_face_contacts
+from fignet_gym.simulator.scene import Scene
 
 _FLOOR = trimesh.Trimesh([[-20, -20, 0], [20, -20, 0], [20, 20, 0], [-20, 20, 0]],
                          [[0, 1, 2], [0, 2, 3]], process=False)

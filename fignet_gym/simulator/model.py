@@ -16,8 +16,8 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-from fignet_gym.collision import FaceContacts, find_face_contacts
-from fignet_gym.geometry import (
+from fignet_gym.simulator.collision import FaceContacts, find_face_contacts
+from fignet_gym.simulator.geometry import (
     axis_angle_to_quat,
     kabsch,
     quat_mul,
@@ -26,10 +26,10 @@ from fignet_gym.geometry import (
     rigid_projection,
     segment_sum,
 )
-from fignet_gym.graph import Graph, build_graph, feature_sizes
-from fignet_gym.networks import EncodeProcessDecode
-from fignet_gym.normalization import Normalizer
-from fignet_gym.scene import MeshOptions, Scene
+from fignet_gym.simulator.graph import Graph, build_graph, feature_sizes
+from fignet_gym.simulator.networks import EncodeProcessDecode
+from fignet_gym.simulator.normalization import Normalizer
+from fignet_gym.simulator.scene import MeshOptions, Scene
 
 CHECKPOINT_FORMAT = "fignet_gym.checkpoint/1"
 

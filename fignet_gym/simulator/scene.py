@@ -390,13 +390,13 @@ class Scene:
 
     def node_positions(self, poses: Tensor) -> Tensor:
         """World node positions. ``float[..., O, 7] -> float[..., N, 3]``."""
-        from fignet_gym.geometry import transform_points
+        from fignet_gym.simulator.geometry import transform_points
 
         return transform_points(poses[..., self.node_object, :], self.ref_vertices)
 
     def com_positions(self, poses: Tensor) -> Tensor:
         """World centre-of-mass positions. ``float[..., O, 7] -> float[..., O, 3]``."""
-        from fignet_gym.geometry import transform_points
+        from fignet_gym.simulator.geometry import transform_points
 
         return transform_points(poses, self.object_com)
 

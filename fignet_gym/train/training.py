@@ -31,10 +31,11 @@ import torch
 from torch import Tensor
 
 from fignet_gym.data.format import Trajectory, load_trajectories
-from fignet_gym.geometry import quat_mul, rigid_moments, segment_sum
-from fignet_gym.graph import FACE_BASE, FACE_EXTRAS
-from fignet_gym.scene import Scene
-from fignet_gym.simulator import LearnedSimulator, SimulatorConfig
+from fignet_gym.pretrained import load_checkpoint
+from fignet_gym.simulator.geometry import quat_mul, rigid_moments, segment_sum
+from fignet_gym.simulator.graph import FACE_BASE, FACE_EXTRAS
+from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
+from fignet_gym.simulator.scene import Scene
 
 
 @dataclass(frozen=True)
@@ -381,7 +382,7 @@ class Trainer:
         self.gen = torch.Generator(device=self.device).manual_seed(seed)
         if init is not None and blob is None:
             # Fine-tuning: weights and normaliser statistics from another run, this run's recipe.
-            warm_start(self.sim, LearnedSimulator.load(init))
+            warm_start(self.sim, load_checkpoint(init))
             print(f"initialised from {init}")
         self.ema = copy.deepcopy(self.sim).requires_grad_(False) if cfg.ema_decay > 0 else None
         if blob is not None:
@@ -581,7 +582,7 @@ class Trainer:
 
     def validate(self, writer: Any | None = None) -> dict[str, float]:
         """Rollout errors on the first validation trajectories; keeps ``best.pt``."""
-        from fignet_gym.evaluation import rollout_metrics
+        from fignet_gym.train.evaluation import rollout_metrics
 
         self.model.eval()
         n = min(self.cfg.valid_trajectories, len(self.valid))

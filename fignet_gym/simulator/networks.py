@@ -1,6 +1,6 @@
 """MLPs and typed encode-process-decode message passing (FIGNet's graph network).
 
-This module knows no physics: it maps a :class:`~fignet_gym.graph.Graph` of feature tensors to one
+This module knows no physics: it maps a :class:`~fignet_gym.simulator.graph.Graph` of feature tensors to one
 output vector per mesh node.
 
 Edge updates are written for speed on CPU without changing the parameters (checkpoints keep
@@ -23,7 +23,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from fignet_gym.graph import Graph
+from fignet_gym.simulator.graph import Graph
 
 
 class MLP(nn.Module):

@@ -1,0 +1,26 @@
+"""The swap point: one :class:`Dynamics` protocol mirroring ``mujoco.mj_step`` / ``mujoco.rollout``,
+with MuJoCo (:mod:`.mujoco`) and learned FIGNet (:mod:`.learned`) implementations.
+
+Layers: :mod:`.base` (protocol, shared helpers) <- :mod:`.mujoco`, :mod:`.learned` <- :mod:`.factory`
+(``dynamics="mujoco" | "fignet"``). No module imports one above it.
+"""
+
+from fignet_gym.dynamics.base import (
+    CONTROL_SPEC,
+    STATE_SPEC,
+    DivergenceError,
+    Dynamics,
+    DynamicsBase,
+    check_rollout_inputs,
+    rollout_loop,
+    set_mocap,
+)
+from fignet_gym.dynamics.factory import DYNAMICS_FACTORIES, make_dynamics
+from fignet_gym.dynamics.learned import FIGNetDynamics
+from fignet_gym.dynamics.mujoco import MujocoDynamics
+
+__all__ = [
+    "CONTROL_SPEC", "DYNAMICS_FACTORIES", "STATE_SPEC", "DivergenceError", "Dynamics", "DynamicsBase",
+    "FIGNetDynamics", "MujocoDynamics", "check_rollout_inputs", "make_dynamics", "rollout_loop",
+    "set_mocap",
+]

@@ -1,0 +1,233 @@
+"""The swap point between analytic and learned dynamics, mirroring MuJoCo's own calls.
+
+A :class:`Dynamics` advances ``mujoco.MjData`` exactly where ``mujoco.mj_step`` would:
+
+* ``step(model, data, nstep)``: like ``mujoco.mj_step(model, data, nstep)``: advances ``data`` in
+  place by ``nstep`` MuJoCo timesteps (free-joint ``qpos``/``qvel``, ``time``) and leaves every
+  derived quantity (``xpos``, contacts, rendering) consistent.
+* ``step_many(model, datas, nstep)``: ``step`` on many ``MjData`` of one model at once (the learned
+  dynamics runs them as one batched graph).
+* ``rollout(model, initial_state, control, nstep, frame_skip=...)``: shaped like
+  ``mujoco.rollout.rollout``: full-physics states ``float64[B, nstate]`` in, mocap trajectories as
+  control, states ``float64[B, nstep, nstate]`` out.
+
+Kinematic bodies are mocap bodies: before a step, set ``data.mocap_pos``/``mocap_quat`` to where
+they should be at the *end* of the step; both implementations move them there linearly from their
+current pose, as the pusher moves in the training data. Time-step contract:
+``docs/architecture.md``.
+
+Two implementations: :class:`~fignet_gym.dynamics.mujoco.MujocoDynamics` (``mj_step``,
+``mujoco.rollout``) and :class:`~fignet_gym.dynamics.learned.FIGNetDynamics` (a
+:class:`~fignet_gym.simulator.LearnedSimulator`). A user's own class works too: subclass
+:class:`DynamicsBase` and implement ``step``, or implement the whole protocol. This module holds
+the protocol and the helpers every implementation shares; it imports no implementation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Protocol, runtime_checkable
+
+import mujoco
+import numpy as np
+
+#: State layout of :meth:`Dynamics.rollout` (``mujoco.rollout``'s): time, qpos, qvel, act, ...
+STATE_SPEC = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
+#: Control layout of :meth:`Dynamics.rollout`: every mocap position, then every mocap quaternion.
+CONTROL_SPEC = int(mujoco.mjtState.mjSTATE_MOCAP_POS | mujoco.mjtState.mjSTATE_MOCAP_QUAT)
+
+
+class DivergenceError(RuntimeError):
+    """A simulation blew up: non-finite or runaway poses (learned), or MuJoCo's own instability.
+
+    Attributes:
+        reason: what went wrong, naming the object and the time.
+        indices: for ``step_many``, positions in ``datas`` of the simulations that diverged (the
+            others were advanced normally; the diverged ones are left as they were before the call,
+            except that MuJoCo resets a simulation it found unstable).
+        reasons: one reason per entry of ``indices``.
+    """
+
+    def __init__(
+        self, reason: str, indices: Sequence[int] = (0,), reasons: Sequence[str] | None = None
+    ) -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.indices = tuple(int(i) for i in indices)
+        self.reasons = tuple(reasons) if reasons is not None else (reason,) * len(self.indices)
+
+
+@runtime_checkable
+class Dynamics(Protocol):
+    """What an environment needs from a physics backend (see the module docstring)."""
+
+    def step(self, model: mujoco.MjModel, data: mujoco.MjData, nstep: int = 1) -> None:
+        """Advance ``data`` in place by ``nstep`` MuJoCo timesteps, like ``mujoco.mj_step``.
+
+        Raises :class:`DivergenceError` if the simulation blew up.
+        """
+        ...
+
+    def step_many(
+        self, model: mujoco.MjModel, datas: Sequence[mujoco.MjData], nstep: int = 1
+    ) -> None:
+        """:meth:`step` on ``B = len(datas)`` simulations of one model.
+
+        Raises :class:`DivergenceError` with ``indices`` of the simulations that blew up, after
+        advancing all the others.
+        """
+        ...
+
+    def rollout(
+        self,
+        model: mujoco.MjModel,
+        initial_state: np.ndarray,
+        control: np.ndarray | None = None,
+        nstep: int | None = None,
+        *,
+        frame_skip: int = 1,
+    ) -> np.ndarray:
+        """Open-loop rollouts: ``float64[B, nstate]`` states and ``float64[B, nstep, nmocap * 7]``
+        mocap targets (each reached over ``frame_skip`` timesteps) -> ``float64[B, nstep, nstate]``."""
+        ...
+
+    def validate(self, model: mujoco.MjModel, nstep: int, scene_type: str = "") -> None:
+        """Raise ``ValueError`` if this dynamics cannot step ``model`` (a scene of kind
+        ``scene_type``: ``"push"``, ``"toss"`` or ``""``) by ``nstep`` timesteps at a time."""
+        ...
+
+
+# --------------------------------------------------------------------------- shared helpers
+def check_rollout_inputs(
+    model: mujoco.MjModel, initial_state: np.ndarray, control: np.ndarray | None, nstep: int | None
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Validate and broadcast rollout inputs.
+
+    Returns ``float64[B, nstate]`` states, ``float64[B, T, ncontrol]`` controls and ``T``.
+    """
+    nstate = mujoco.mj_stateSize(model, STATE_SPEC)
+    ncontrol = mujoco.mj_stateSize(model, CONTROL_SPEC)
+    state = np.asarray(initial_state, dtype=np.float64)
+    if state.ndim == 1:
+        state = state[None]
+    if state.ndim != 2 or state.shape[1] != nstate:
+        raise ValueError(
+            f"initial_state must be float[B, {nstate}] (mjSTATE_FULLPHYSICS), "
+            f"got shape {np.shape(initial_state)}"
+        )
+    if control is None:
+        if nstep is None:
+            raise ValueError("rollout needs control or nstep")
+        if ncontrol:
+            raise ValueError(
+                f"the model has mocap bodies: control float[B, nstep, {ncontrol}] is required"
+            )
+        control = np.zeros((state.shape[0], nstep, 0))
+    control = np.asarray(control, dtype=np.float64)
+    if control.ndim == 2:
+        control = control[None]
+    if control.ndim != 3 or control.shape[2] != ncontrol:
+        raise ValueError(
+            f"control must be float[B, nstep, {ncontrol}] (mocap_pos then mocap_quat), "
+            f"got shape {np.shape(control)}"
+        )
+    nstep = control.shape[1] if nstep is None else int(nstep)
+    if control.shape[1] not in (1, nstep):
+        raise ValueError(f"control has {control.shape[1]} steps, nstep is {nstep}")
+    B = max(state.shape[0], control.shape[0])
+    if state.shape[0] not in (1, B) or control.shape[0] not in (1, B):
+        raise ValueError(
+            f"batch sizes differ: initial_state {state.shape[0]}, control {control.shape[0]}"
+        )
+    if not (np.isfinite(state).all() and np.isfinite(control).all()):
+        raise ValueError("rollout inputs contain NaN or infinite values")
+    state = np.broadcast_to(state, (B, nstate))
+    control = np.broadcast_to(control, (B, nstep, ncontrol))
+    return np.ascontiguousarray(state), np.ascontiguousarray(control), nstep
+
+
+def set_mocap(model: mujoco.MjModel, data: mujoco.MjData, control_row: np.ndarray) -> None:
+    """Write one control row (mocap_pos then mocap_quat, ``float[nmocap * 7]``) into ``data``."""
+    nm = model.nmocap
+    data.mocap_pos[:] = control_row[: 3 * nm].reshape(nm, 3)
+    data.mocap_quat[:] = control_row[3 * nm :].reshape(nm, 4)
+
+
+class DynamicsBase:
+    """Defaults for a :class:`Dynamics`: subclasses implement :meth:`step` only.
+
+    ``step_many`` loops over ``step``, ``rollout`` loops ``step`` on a scratch ``MjData`` (mocap
+    bodies start at ``control[:, 0]``), ``validate`` accepts everything.
+    """
+
+    def step(self, model: mujoco.MjModel, data: mujoco.MjData, nstep: int = 1) -> None:
+        """Advance ``data`` by ``nstep`` timesteps (to implement); see :meth:`Dynamics.step`."""
+        raise NotImplementedError
+
+    def step_many(
+        self, model: mujoco.MjModel, datas: Sequence[mujoco.MjData], nstep: int = 1
+    ) -> None:
+        """Loop of :meth:`step`; see :meth:`Dynamics.step_many`."""
+        bad, reasons = [], []
+        for i, d in enumerate(datas):
+            try:
+                self.step(model, d, nstep)
+            except DivergenceError as err:
+                bad.append(i)
+                reasons.append(err.reason)
+        if bad:
+            raise DivergenceError(
+                "; ".join(f"[{i}] {r}" for i, r in zip(bad, reasons, strict=True)), bad, reasons
+            )
+
+    def rollout(
+        self,
+        model: mujoco.MjModel,
+        initial_state: np.ndarray,
+        control: np.ndarray | None = None,
+        nstep: int | None = None,
+        *,
+        frame_skip: int = 1,
+    ) -> np.ndarray:
+        """A loop of :meth:`step` per rollout (see :meth:`Dynamics.rollout`); diverged rows: NaN."""
+        state, control, nstep = check_rollout_inputs(model, initial_state, control, nstep)
+        out = np.full((state.shape[0], nstep, state.shape[1]), np.nan)
+        data = mujoco.MjData(model)
+        for b in range(state.shape[0]):
+            rollout_loop(self, model, data, state[b], control[b], frame_skip, out[b])
+        return out
+
+    def validate(self, model: mujoco.MjModel, nstep: int, scene_type: str = "") -> None:
+        """Accept every model (override to check)."""
+
+
+def rollout_loop(
+    dynamics: Dynamics,
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    initial_state: np.ndarray,
+    control: np.ndarray,
+    frame_skip: int,
+    out: np.ndarray | None = None,
+) -> np.ndarray:
+    """One rollout as a loop of single :meth:`Dynamics.step` calls (the reference for ``rollout``).
+
+    ``data`` is reset, loaded with ``initial_state float64[nstate]``, its mocap bodies placed at
+    ``control[0]`` (``float64[T, nmocap * 7]``) and forwarded; then each control row is applied
+    and ``frame_skip`` timesteps taken. Returns the states ``float64[T, nstate]`` (rows after a
+    :class:`DivergenceError` are NaN).
+    """
+    T = control.shape[0]
+    out = np.full((T, mujoco.mj_stateSize(model, STATE_SPEC)), np.nan) if out is None else out
+    mujoco.mj_resetData(model, data)
+    mujoco.mj_setState(model, data, np.asarray(initial_state, dtype=np.float64), STATE_SPEC)
+    set_mocap(model, data, control[0])
+    mujoco.mj_forward(model, data)
+    for t in range(T):
+        set_mocap(model, data, control[t])
+        try:
+            dynamics.step(model, data, frame_skip)
+        except DivergenceError:
+            break
+        mujoco.mj_getState(model, data, out[t], STATE_SPEC)
+    return out

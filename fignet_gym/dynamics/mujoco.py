@@ -1,0 +1,141 @@
+"""MuJoCo itself behind the :class:`~fignet_gym.dynamics.base.Dynamics` interface."""
+
+from __future__ import annotations
+
+import os
+import weakref
+
+import mujoco
+import numpy as np
+
+from fignet_gym.dynamics.base import (
+    CONTROL_SPEC,
+    STATE_SPEC,
+    DivergenceError,
+    DynamicsBase,
+    check_rollout_inputs,
+)
+
+_WARNINGS = (
+    mujoco.mjtWarning.mjWARN_BADQACC,
+    mujoco.mjtWarning.mjWARN_BADQPOS,
+    mujoco.mjtWarning.mjWARN_BADQVEL,
+)
+
+
+class MujocoDynamics(DynamicsBase):
+    """MuJoCo itself: ``mujoco.mj_step`` and threaded ``mujoco.rollout``.
+
+    ``step`` is ``mujoco.mj_step(model, data, nstep)``, then raises :class:`DivergenceError` if
+    MuJoCo reported an instability (bad ``qacc``/``qpos``/``qvel`` warnings; MuJoCo has then
+    already reset ``data``). Mocap targets move linearly over the ``nstep`` timesteps, from the
+    mocap bodies' current poses (``xpos``/``xquat``) to ``mocap_pos``/``mocap_quat``, as the
+    training data's pusher does: holding a target for all substeps would make the pusher jump and
+    kick the object (a 0.1 m/s push launched it at 0.7 m/s). With targets at the current poses,
+    ``step`` is exactly ``mj_step``.
+
+    Args:
+        nthread: threads of :meth:`rollout` (default: the CPU count).
+    """
+
+    def __init__(self, nthread: int | None = None) -> None:
+        self.nthread = int(nthread or os.cpu_count() or 1)
+        self._pool: mujoco.rollout.Rollout | None = None
+        self._scratch: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+    def step(self, model: mujoco.MjModel, data: mujoco.MjData, nstep: int = 1) -> None:
+        """``mujoco.mj_step(model, data, nstep)``; :class:`DivergenceError` if MuJoCo blew up."""
+        before = [data.warning[w].number for w in _WARNINGS]
+        bodies = mocap_bodies(model)
+        start = np.concatenate((data.xpos[bodies].ravel(), data.xquat[bodies].ravel()))
+        target = np.concatenate((data.mocap_pos.ravel(), data.mocap_quat.ravel()))
+        if nstep == 1 or np.array_equal(start, target):
+            mujoco.mj_step(model, data, nstep)
+        else:
+            path = interpolate_mocap(start[None], target[None, None], nstep, model.nmocap)[0]
+            for row in path:
+                data.mocap_pos[:] = row[: 3 * model.nmocap].reshape(-1, 3)
+                data.mocap_quat[:] = row[3 * model.nmocap :].reshape(-1, 4)
+                mujoco.mj_step(model, data, 1)
+        after = [data.warning[w].number for w in _WARNINGS]
+        if after != before:
+            names = [w.name for w, a, b in zip(_WARNINGS, after, before, strict=True) if a != b]
+            raise DivergenceError(
+                f"MuJoCo reported {', '.join(names)} at t={data.time:.3f}s "
+                "(it reset the simulation)"
+            )
+
+    def rollout(
+        self,
+        model: mujoco.MjModel,
+        initial_state: np.ndarray,
+        control: np.ndarray | None = None,
+        nstep: int | None = None,
+        *,
+        frame_skip: int = 1,
+    ) -> np.ndarray:
+        """``mujoco.rollout`` on a persistent thread pool, one state per ``frame_skip`` timesteps.
+
+        Args:
+            initial_state: ``float64[B or 1, nstate]`` (``mjSTATE_FULLPHYSICS``).
+            control: ``float64[B or 1, nstep, nmocap * 7]`` mocap targets (positions, then
+                quaternions): row ``t`` is reached linearly over the ``frame_skip`` timesteps of
+                step ``t``, from row ``t - 1`` (from the initial state's mocap pose for ``t = 0``).
+            nstep: number of recorded states (default: ``control.shape[1]``).
+            frame_skip: MuJoCo timesteps per recorded state (1: exactly ``mujoco.rollout``).
+
+        Returns:
+            ``float64[B, nstep, nstate]`` the state after each ``frame_skip`` timesteps.
+        """
+        state, control, nstep = check_rollout_inputs(model, initial_state, control, nstep)
+        if frame_skip < 1:
+            raise ValueError(f"frame_skip must be >= 1, got {frame_skip}")
+        from mujoco import rollout as mj_rollout
+
+        if self._pool is None:
+            self._pool = mj_rollout.Rollout(nthread=self.nthread if self.nthread > 1 else 0)
+        datas = self._scratch.get(model)
+        if datas is None:
+            datas = [mujoco.MjData(model) for _ in range(max(self.nthread, 1))]
+            self._scratch[model] = datas
+        fine = control
+        if frame_skip > 1 and model.nmocap:
+            start = np.empty((state.shape[0], control.shape[2]))
+            scratch = datas[0]
+            for b in range(state.shape[0]):
+                mujoco.mj_setState(model, scratch, state[b], STATE_SPEC)
+                start[b] = np.concatenate((scratch.mocap_pos.ravel(), scratch.mocap_quat.ravel()))
+            fine = interpolate_mocap(start, control, frame_skip, model.nmocap)
+        elif frame_skip > 1:
+            fine = np.repeat(control, frame_skip, axis=1)
+        out, _ = self._pool.rollout(
+            model, datas, state, fine, control_spec=CONTROL_SPEC, nstep=nstep * frame_skip
+        )
+        return np.ascontiguousarray(out[:, frame_skip - 1 :: frame_skip])
+
+    def close(self) -> None:
+        """Stop the rollout thread pool."""
+        if self._pool is not None:
+            self._pool.close()
+            self._pool = None
+
+
+def mocap_bodies(model: mujoco.MjModel) -> np.ndarray:
+    """Body id of each mocap id, ``int[nmocap]``."""
+    ids = np.nonzero(model.body_mocapid >= 0)[0]
+    return ids[np.argsort(model.body_mocapid[ids])]
+
+
+def interpolate_mocap(start: np.ndarray, targets: np.ndarray, substeps: int, nmocap: int) -> np.ndarray:
+    """Per-timestep mocap controls moving linearly through a sequence of targets.
+
+    ``start float[B, C]`` and ``targets float[B, T, C]`` (``C = nmocap * 7``: positions then
+    quaternions) -> ``float[B, T * substeps, C]``; quaternions are normalised linear blends.
+    """
+    prev = np.concatenate((start[:, None], targets[:, :-1]), axis=1)  # [B, T, C]
+    frac = (np.arange(1, substeps + 1) / substeps)[None, None, :, None]
+    path = prev[:, :, None] + (targets - prev)[:, :, None] * frac  # [B, T, S, C]
+    q = path[..., 3 * nmocap :].reshape(*path.shape[:-1], nmocap, 4)
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    path[..., 3 * nmocap :] = q.reshape(*path.shape[:-1], nmocap * 4)
+    return path.reshape(path.shape[0], -1, path.shape[-1])

@@ -1,0 +1,71 @@
+"""Gymnasium ids of the package's environments, registered by string entry points.
+
+Registering imports Gymnasium but no environment module: ``gym.make`` imports the env (and MuJoCo,
+torch) only when an env is made. :mod:`fignet_gym` calls :func:`register_envs` as soon as Gymnasium
+is imported, so ``import fignet_gym`` alone keeps the simulator core free of the RL stack.
+"""
+
+from __future__ import annotations
+
+import importlib.abc
+import importlib.machinery
+import sys
+from types import ModuleType
+from typing import Any
+
+#: Registered ids: (entry point, vector entry point, episode step limit or None).
+ENV_SPECS: dict[str, tuple[str, str, int | None]] = {
+    "fignet_gym/Push-v0": ("fignet_gym.envs.push:PushEnv", "fignet_gym.envs.push:PushVectorEnv", 50),
+    "fignet_gym/Toss-v0": ("fignet_gym.envs.toss:TossEnv", "fignet_gym.envs.toss:TossVectorEnv", None),
+}
+#: Registered ids and their episode limits (Toss ends by itself once every object is released).
+ENV_IDS: dict[str, int | None] = {k: v[2] for k, v in ENV_SPECS.items()}
+
+
+def register_envs() -> None:
+    """Register every id of :data:`ENV_SPECS` with Gymnasium (idempotent)."""
+    import gymnasium as gym
+
+    for env_id, (entry, vector_entry, limit) in ENV_SPECS.items():
+        if env_id not in gym.registry:
+            gym.register(id=env_id, entry_point=entry, vector_entry_point=vector_entry,
+                         max_episode_steps=limit)
+
+
+class _RegisterAfterImport(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """Runs :func:`register_envs` right after ``gymnasium`` itself has been imported.
+
+    Gymnasium 1.x loads no plugin entry points, and importing it from the core would load the RL
+    stack for users who only want the simulator; this finder defers registration to the moment a
+    user's own ``import gymnasium`` happens, whichever of the two packages is imported first.
+    """
+
+    def __init__(self) -> None:
+        self._spec: importlib.machinery.ModuleSpec | None = None
+
+    def find_spec(self, name: str, path: Any = None, target: Any = None) -> Any:
+        if name != "gymnasium" or self._spec is not None:
+            return None
+        sys.meta_path.remove(self)
+        spec = importlib.machinery.PathFinder.find_spec(name, path)
+        if spec is None or spec.loader is None:
+            return None
+        self._spec = spec
+        self._inner = spec.loader
+        spec.loader = self
+        return spec
+
+    def create_module(self, spec: importlib.machinery.ModuleSpec) -> ModuleType | None:
+        return self._inner.create_module(spec)
+
+    def exec_module(self, module: ModuleType) -> None:
+        self._inner.exec_module(module)
+        register_envs()
+
+
+def register_when_gymnasium_loads() -> None:
+    """Register now if Gymnasium is imported, else as soon as it is."""
+    if "gymnasium" in sys.modules:
+        register_envs()
+    elif not any(isinstance(f, _RegisterAfterImport) for f in sys.meta_path):
+        sys.meta_path.insert(0, _RegisterAfterImport())

@@ -1,0 +1,1 @@
+"""Command-line tools that sit on top of everything else: the demo and the benchmarks."""
