@@ -234,10 +234,38 @@ print("LOADED")
 """
 
 
-def audit_checkpoints(tmp: Path) -> None:
+def sealed_flips(tmp: Path) -> dict[str, Path]:
+    """Flipped bytes in a copy of push.pt re-saved with its content checksum (``add_checksum``)."""
+    from fignet_gym.pretrained import pretrained_path
+    from fignet_gym.simulator.checkpoint import add_checksum
+
+    src = add_checksum(pretrained_path("push"), tmp / "push_sealed.pt")
+    raw = src.read_bytes()
+    with zipfile.ZipFile(src) as z:
+        info = max((i for i in z.infolist() if "/data/" in i.filename), key=lambda i: i.file_size)
+    head = raw[info.header_offset : info.header_offset + 30]
+    start = (
+        info.header_offset
+        + 30
+        + int.from_bytes(head[26:28], "little")
+        + int.from_bytes(head[28:30], "little")
+    )
+    out = {}
+    rng = np.random.default_rng(1)
+    for n_flip in (10, 200, 2000):
+        data = bytearray(raw)
+        for pos in rng.integers(start, start + info.file_size, n_flip):
+            data[pos] ^= 0xFF
+        p = tmp / f"sealed_flip_{n_flip}.pt"
+        p.write_bytes(bytes(data))
+        out[f"sealed_flip_{n_flip}"] = p
+    return out
+
+
+def audit_checkpoints(tmp: Path, sealed_only: bool = False) -> None:
     import resource
 
-    files = crafted_checkpoints(tmp)
+    files = sealed_flips(tmp) if sealed_only else crafted_checkpoints(tmp)
     for name, path in files.items():
 
         def limit() -> None:
@@ -270,6 +298,8 @@ def audit_checkpoints(tmp: Path) -> None:
             in ("mps_1e7", "latent_2e5", "history_1e6", "hidden_neg", "latent_wrong", "dt_nan", "radius_inf")
             else "3 corrupt weights"
             if name.startswith(("flip", "all_nan", "one_inf"))
+            else "3 corrupt weights (sealed copy)"
+            if name.startswith("sealed")
             else "5 structural checkpoint"
         )
         record(cls, f"load {name}", out)
@@ -763,6 +793,7 @@ def main() -> None:
             ("datasets", lambda: audit_datasets(tmp)),
             ("cli", lambda: audit_cli(tmp, quick)),
             ("sigkill", lambda: audit_sigkill(tmp)),
+            ("sealed", lambda: audit_checkpoints(tmp, sealed_only=True)),
         ):
             if (
                 len(sys.argv) > 1
