@@ -347,3 +347,18 @@ def test_face_groups_are_config_flags_and_set_the_feature_width(push_like_xml: s
         assert cfg.face_groups == (grp,) and SMALL.face_groups == ()
         width = LearnedSimulator(cfg).build_inputs(scene, hist, hist[-1]).graph.face_edges.features.shape[1]
         assert width == FACE_BASE + grp.size == feature_sizes(2, face_groups=(grp,))["face"]
+
+
+def test_node_collision_baseline_uses_node_edges_only(push_like_xml: str) -> None:
+    sim = LearnedSimulator(replace(SMALL, collision="node", collision_radius=0.04)).eval()
+    randomize_normalizers(sim, push_like_xml)
+    scene, hist = scene_and_history(push_like_xml)
+    g = sim.build_inputs(scene, hist, hist[-1]).graph
+    s, r = g.node_edges.senders, g.node_edges.receivers
+    assert g.face_edges.features.shape == (0, 34) and s.numel() > 0
+    assert (scene.node_object[s] != scene.node_object[r]).all()
+    d = g.node_pos[s] - g.node_pos[r]
+    assert (d.norm(dim=-1) < 0.04).all()
+    assert torch.allclose(g.node_edges.features, torch.cat((d, d.norm(dim=-1, keepdim=True)), -1))
+    out = sim.step(scene, hist, hist[-1])
+    assert torch.isfinite(out).all() and not torch.allclose(out[1], hist[-1, 1], atol=1e-6)

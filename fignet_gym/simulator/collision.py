@@ -199,7 +199,8 @@ def _closest_points(tri_a: Tensor, tri_b: Tensor) -> tuple[Tensor, Tensor, Tenso
     return _dot(diff, diff).sqrt(), point_a, point_b
 
 
-def _empty_contacts(like: Tensor) -> FaceContacts:
+def no_face_contacts(like: Tensor) -> FaceContacts:
+    """Zero contacts, with the device and float dtype of ``like``."""
     idx = torch.zeros(0, dtype=torch.long, device=like.device)
     pts = like.new_zeros(0, 3)
     return FaceContacts(idx, idx.clone(), pts, pts.clone(), like.new_zeros(0))
@@ -240,7 +241,7 @@ def find_face_contacts(
         (the first ``C / 2`` contacts have their sender on the side of ``object_pairs[:, 0]``).
     """
     if object_pairs.shape[0] == 0 or faces.shape[0] == 0:
-        return _empty_contacts(node_pos)
+        return no_face_contacts(node_pos)
     # Coordinates first (triangles [9, F], boxes [6, F]): gathers and reductions then run over
     # contiguous memory; 2-D index_select and amin beat fancy indexing, 3-D gathers and all()
     # several times on CPU.
@@ -257,7 +258,7 @@ def find_face_contacts(
     pairs = object_pairs.index_select(0, near.nonzero().squeeze(1))  # [K', 2]
     n_pairs = pairs.shape[0]
     if n_pairs == 0:
-        return _empty_contacts(node_pos)
+        return no_face_contacts(node_pos)
 
     # Faces of each object near its partner's box. Entry e < K' stands for the first object of
     # pair e against the second's box, entry K' + e for the reverse.
@@ -317,8 +318,7 @@ def node_collision_edges(node_pos: Tensor, node_object: Tensor, object_pairs: Te
     """
     pairs = object_pairs
     if pairs.shape[0] == 0:
-        empty = torch.zeros(0, dtype=torch.long, device=node_pos.device)
-        return empty, empty
+        return no_node_edges(node_pos)
     n_obj = max(int(node_object.max()), int(pairs.max())) + 1
     counts = torch.bincount(node_object, minlength=n_obj)
     starts = torch.cumsum(counts, 0) - counts
@@ -332,3 +332,9 @@ def node_collision_edges(node_pos: Tensor, node_object: Tensor, object_pairs: Te
     close = ((node_pos[a] - node_pos[b]) ** 2).sum(-1) < radius**2
     a, b = a[close], b[close]
     return torch.cat((a, b)), torch.cat((b, a))
+
+
+def no_node_edges(like: Tensor) -> tuple[Tensor, Tensor]:
+    """Zero node-node edges ``(int64[0], int64[0])`` on the device of ``like``."""
+    empty = torch.zeros(0, dtype=torch.long, device=like.device)
+    return empty, empty.clone()

@@ -251,9 +251,8 @@ def _static_features(scene: Scene, clip: float) -> dict[str, Tensor]:
 
 
 def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Tensor,
-                com_next: Tensor, contacts: FaceContacts | None,
-                node_edges: tuple[Tensor, Tensor] | None = None, clip: float = 0.0,
-                face_groups: Sequence[FaceGroup] = ()) -> Graph:
+                com_next: Tensor, contacts: FaceContacts, node_edges: tuple[Tensor, Tensor],
+                clip: float = 0.0, face_groups: Sequence[FaceGroup] = ()) -> Graph:
     """Assemble all un-normalised input features.
 
     Args:
@@ -262,9 +261,9 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
         com_hist: ``float[H, O, 3]`` centre-of-mass positions, oldest first.
         node_next: ``float[N, 3]`` next positions (used for kinematic nodes only).
         com_next: ``float[O, 3]`` next centre-of-mass positions (kinematic objects only).
-        contacts: face-face contacts at the current positions (``None``: no face edges).
-        node_edges: MeshGraphNets-style node-node collision edges ``(senders, receivers)``
-            (``None``: no node-node edges).
+        contacts: face-face contacts at the current positions (none for the node baseline).
+        node_edges: MeshGraphNets-style node-node collision edges ``(senders int64[W], receivers
+            int64[W])`` (none for FIGNet's face edges).
         clip: length (m) above which face spanning vectors and object-mesh offsets are shortened
             (0: the paper's unclipped features).
         face_groups: optional face-edge feature groups (:data:`FACE_GROUPS`) to append.
@@ -289,18 +288,9 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
     om_f = torch.cat((rel * flip, static["rel_ref"] * flip), dim=-1)
     mo_f = torch.cat((rel, static["rel_ref"]), dim=-1)
 
-    empty_i = torch.zeros(0, dtype=torch.long, device=cur.device)
-    if contacts is not None:
-        fs, fr, ff = face_edge_features(cur, scene.faces, contacts, kin_disp[:n], clip, face_groups)
-    else:
-        fs = fr = empty_i.reshape(0, 3)
-        ff = cur.new_zeros(0, feature_sizes(1, face_groups=face_groups)["face"])
-    if node_edges is not None:
-        ns, nr = node_edges
-        nf = with_norm(cur[ns] - cur[nr])
-    else:
-        ns = nr = empty_i
-        nf = cur.new_zeros(0, 4)
+    fs, fr, ff = face_edge_features(cur, scene.faces, contacts, kin_disp[:n], clip, face_groups)
+    ns, nr = node_edges
+    nf = with_norm(cur[ns] - cur[nr])
     return Graph(
         node_features=node_f, object_features=obj_f, node_object=scene.node_object,
         obj_mesh_features=om_f, mesh_obj_features=mo_f,

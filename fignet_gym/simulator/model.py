@@ -16,7 +16,13 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-from fignet_gym.simulator.collision import FaceContacts, find_face_contacts, node_collision_edges
+from fignet_gym.simulator.collision import (
+    FaceContacts,
+    find_face_contacts,
+    no_face_contacts,
+    no_node_edges,
+    node_collision_edges,
+)
 from fignet_gym.simulator.geometry import (
     axis_angle_to_quat,
     kabsch,
@@ -156,7 +162,7 @@ class StepInputs:
     graph: Graph
     node_hist: Tensor
     node_next: Tensor
-    contacts: FaceContacts | None
+    contacts: FaceContacts
 
 
 @dataclass(frozen=True)
@@ -219,17 +225,18 @@ class LearnedSimulator(nn.Module):
                             clip=self.config.feature_clip, face_groups=self.config.face_groups)
         return StepInputs(graph, node_hist, node_next, contacts)
 
-    def collide(self, scene: Scene, node_pos: Tensor
-                ) -> tuple[FaceContacts | None, tuple[Tensor, Tensor] | None]:
-        """Collision edges at node positions ``float[N, 3]``: ``(face contacts, None)`` for face
-        collisions (receivers on dynamic objects only), ``(None, node edges)`` else."""
+    def collide(self, scene: Scene, node_pos: Tensor) -> tuple[FaceContacts, tuple[Tensor, Tensor]]:
+        """Collision edges at node positions ``float[N, 3]``: ``(face contacts, node edges)``, of
+        which the kind not configured (``collision``) is empty. Face contacts keep receivers on
+        dynamic objects only."""
         radius = self.config.collision_radius
         if self.config.collision != "face":
-            return None, node_collision_edges(node_pos, scene.node_object, scene.collision_pairs, radius)
+            edges = node_collision_edges(node_pos, scene.node_object, scene.collision_pairs, radius)
+            return no_face_contacts(node_pos), edges
         contacts = find_face_contacts(node_pos, scene.faces, scene.face_object, scene.collision_pairs, radius)
         keep = scene.dynamic_mask[scene.face_object[contacts.receiver_face]].nonzero().squeeze(1)
         contacts = FaceContacts(*(getattr(contacts, f.name).index_select(0, keep) for f in fields(contacts)))
-        return contacts, None
+        return contacts, no_node_edges(node_pos)
 
     def normalize(self, g: Graph, accumulate: bool = False) -> Graph:
         """Normalise every feature tensor (accumulating statistics when training)."""
