@@ -23,7 +23,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from fignet_gym.dynamics import DivergenceError
-from fignet_gym.envs.base import MjDynamicsEnv
+from fignet_gym.envs.base import MjDynamicsEnv, check_action
 
 
 def _is_seed(value: Any) -> bool:
@@ -114,7 +114,11 @@ class BatchedVectorEnv(VectorEnv):
         self, actions: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """``float[N, A]`` actions -> observations ``float32[N, D]``, rewards ``float64[N]``,
-        terminations ``bool[N]``, truncations ``bool[N]``, batched infos."""
+        terminations ``bool[N]``, truncations ``bool[N]``, batched infos.
+
+        The whole batch is checked first (``ValueError`` for a wrong shape or a NaN/inf in any
+        row, also in a row that is being reset and whose action is ignored): a refused batch
+        changes no sub-environment."""
         try:
             acts = np.asarray(actions, dtype=np.float64)
         except (TypeError, ValueError) as exc:
@@ -137,6 +141,8 @@ class BatchedVectorEnv(VectorEnv):
         for i in stepping:
             self.envs[i]._check_was_reset()
         applied = {i: self.envs[i]._check_step(acts[i]) for i in stepping}
+        for i in np.flatnonzero(resetting):  # ignored (the row resets), but a NaN is still a bug
+            check_action(str(self), acts[i], self.single_action_space)
         for i in stepping:
             self.envs[i]._apply_action(applied[i])
         reasons: dict[int, str] = {}

@@ -4,47 +4,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 from collections.abc import Callable, Sequence
 
-
-# ----------------------------------------------------------------------------- argument types
-def int_at_least(low: int) -> Callable[[str], int]:
-    """argparse ``type``: an integer ``>= low`` (argparse prints the message and exits 2)."""
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {text!r}") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {value}")
-        return value
-    parse.__name__ = f"integer >= {low}"
-    return parse
-
-
-def positive_float(text: str) -> float:
-    """argparse ``type``: a finite number ``> 0``."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
-    return value
-
-
-def nonnegative_float(text: str) -> float:
-    """argparse ``type``: a finite number ``>= 0``."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
-    return value
+from fignet_gym.data.cli import int_at_least, nonnegative_float
 
 
 # ----------------------------------------------------------------------------- user errors
@@ -56,13 +20,13 @@ def user_error(err: BaseException) -> str | None:
     and config checks. Their messages already name the file and field.
     """
     from fignet_gym.data.generate import GenerationError
-    from fignet_gym.simulator.model import CheckpointError
 
+    # CheckpointError, TrajectoryFormatError, RunFolderError and UnsupportedSceneError are
+    # ValueErrors.
     if isinstance(err, OSError) and not isinstance(err, (FileExistsError, FileNotFoundError)):
         name = err.filename if err.filename is not None else ""
         return f"{name}: {err.strerror or err}" if name else str(err)
-    if isinstance(err, (CheckpointError, ValueError, FileExistsError, FileNotFoundError,
-                        GenerationError)):
+    if isinstance(err, (ValueError, FileExistsError, FileNotFoundError, GenerationError)):
         return str(err)
     return None
 

@@ -40,6 +40,7 @@ from fignet_gym.data.generate import default_config, iter_trajectories
 from fignet_gym.envs.push import PushEnv
 from fignet_gym.envs.sb3 import SB3VecEnvAdapter
 from fignet_gym.envs.toss import TossEnv
+from fignet_gym.mjcf import TossObject
 from fignet_gym.pretrained import pretrained_path
 from fignet_gym.simulator.checkpoint import (
     CheckpointWarning,
@@ -112,6 +113,20 @@ def test_a_rejected_vector_batch_changes_nothing(env_id: str, row: int, sb3: boo
     np.testing.assert_array_equal(a[0], b[0])
     np.testing.assert_array_equal(a[1], b[1])
     assert _same(_snapshot(venv), _snapshot(ref))
+
+
+def test_a_nan_in_a_row_being_reset_is_refused_too() -> None:
+    """NEXT_STEP autoreset ignores the action of a row that resets; a NaN there is still refused
+    (it is an agent's bug), and the refused batch changes nothing."""
+    venv = gym.make_vec("fignet_gym/Toss-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                        objects=[TossObject("cube", 0.7, "metal")], settle_steps=2)
+    venv.reset(seed=0)
+    _, _, term, _, _ = venv.step(np.zeros((2, 2)))
+    assert term.all()  # one object each: both episodes ended, both rows reset on the next step
+    before = _snapshot(venv)
+    with pytest.raises(ValueError, match="NaN"):
+        venv.step(np.array([[0.0, 0.0], [np.nan, 0.0]]))
+    assert _same(before, _snapshot(venv))
 
 
 def test_a_rejected_batch_with_the_learned_dynamics_changes_nothing() -> None:

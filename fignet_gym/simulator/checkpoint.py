@@ -192,8 +192,8 @@ def config_from_dict(d: dict[str, Any], path: str | os.PathLike = "checkpoint") 
     try:
         config = SimulatorConfig.from_dict(d)
         check_config(config)
-    except CheckpointError as exc:
-        raise CheckpointError(f"{path}: config: {exc}") from None
+    except CheckpointError as exc:  # already says "config key ..."
+        raise CheckpointError(f"{path}: {exc}") from None
     except (TypeError, ValueError, AttributeError) as exc:
         raise CheckpointError(f"{path}: config: {exc}") from None
     return config
