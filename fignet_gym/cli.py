@@ -18,10 +18,15 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
+    from fignet_gym.data.format import TrajectoryFormatError
     from fignet_gym.train.evaluation import evaluate
 
-    evaluate(args.checkpoint, args.data, args.out, num=args.num, horizon=args.horizon,
-             videos=args.videos, against=args.against)
+    try:
+        evaluate(args.checkpoint, args.data, args.out, num=args.num, horizon=args.horizon,
+                 videos=args.videos, against=args.against)
+    except (TrajectoryFormatError, FileNotFoundError, ValueError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -88,8 +93,10 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--checkpoint", required=True, help="checkpoint file or pretrained name")
     e.add_argument("--data", required=True, help="held-out trajectories (HDF5)")
     e.add_argument("--out", default="outputs/eval", help="folder for metrics.json, plots, videos")
-    e.add_argument("--num", type=int, default=32, help="trajectories to evaluate")
-    e.add_argument("--horizon", type=int, default=50, help="step at which errors are reported")
+    e.add_argument("--num", type=int, default=None, help="first N trajectories (default: all)")
+    e.add_argument("--horizon", type=int, default=50,
+                   help="frame of the headline errors, counted from frame 0 of each trajectory "
+                   "(each trajectory's last frame is scored too)")
     e.add_argument("--videos", type=int, default=2, help="side-by-side videos to write")
     e.add_argument("--against", help="second checkpoint (e.g. a baseline) on the same trajectories: "
                    "ratio of median errors with a bootstrap interval")
