@@ -1,4 +1,5 @@
-"""Data subcommands of ``fignet-gym``: ``generate``, ``show``, ``import-mit``, ``import-movi``.
+"""Data subcommands of ``fignet-gym``: ``generate``, ``show``, ``import-mit``, ``import-movi``,
+``import-contactnets``, ``split``.
 
 :func:`register` adds them to the main parser's subparsers; each sets ``func`` to a callable that
 takes the parsed arguments and returns an exit code. Known bad input (malformed files, unknown
@@ -94,6 +95,23 @@ def _import_movi(args: argparse.Namespace) -> int:
     return 0
 
 
+def _import_contactnets(args: argparse.Namespace) -> int:
+    from fignet_gym.data.tracked import import_contactnets
+
+    n = import_contactnets(args.directory, args.out, length_unit=args.length_unit,
+                           floor_half_size=args.floor_half_size, skip_bad=args.skip_bad)
+    print(f"imported {n} ContactNets tosses into {args.out}")
+    return 0
+
+
+def _split(args: argparse.Namespace) -> int:
+    from fignet_gym.data.split import write_split
+
+    paths = write_split(args.data, args.out, args.fractions, args.seed)
+    print(f"wrote {', '.join(str(p) for p in paths.values())}")
+    return 0
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the data subcommands to ``subparsers`` (of the ``fignet-gym`` parser)."""
     from fignet_gym.data.generate import KINDS
@@ -157,6 +175,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     v.add_argument("--floor-half-size", type=float, default=20.0)
     v.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
     v.set_defaults(func=_guarded(_import_movi))
+
+    c = subparsers.add_parser("import-contactnets",
+                              help="import the DAIRLab ContactNets real cube tosses")
+    c.add_argument("directory", help="folder with params_processed/experiment.json and "
+                   "tosses_processed/*.pt")
+    c.add_argument("--out", required=True)
+    c.add_argument("--length-unit", type=float, default=None,
+                   help="metres per data unit (default: 9.81 / the file's g, the half-width)")
+    c.add_argument("--floor-half-size", type=float, default=2.0, help="floor plane half-size (m)")
+    c.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
+    c.set_defaults(func=_guarded(_import_contactnets))
+
+    sp = subparsers.add_parser("split", help="seeded train/valid/test split of a trajectory file")
+    sp.add_argument("data")
+    sp.add_argument("--out", required=True, help="folder for train.h5, valid.h5, test.h5, split.json")
+    sp.add_argument("--fractions", type=float, nargs=3, default=[0.6, 0.2, 0.2],
+                    metavar=("TRAIN", "VALID", "TEST"))
+    sp.add_argument("--seed", type=int, default=0)
+    sp.set_defaults(func=_guarded(_split))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
