@@ -9,11 +9,21 @@ from collections.abc import Sequence
 
 
 def _train(args: argparse.Namespace) -> int:
+    from fignet_gym.data.format import TrajectoryFormatError
+    from fignet_gym.simulator.model import CheckpointError
     from fignet_gym.train.training import train_from_files
 
-    overrides = dict(json.loads(args.set)) if args.set else {}
-    train_from_files(args.data, args.valid, args.config, args.out, resume=args.resume,
-                     overrides=overrides, max_train=args.max_train, init=args.init)
+    try:
+        overrides = dict(json.loads(args.set)) if args.set else {}
+        train_from_files(args.data, args.valid, args.config, args.out, resume=args.resume,
+                         overrides=overrides, max_train=args.max_train, init=args.init)
+    except json.JSONDecodeError as err:
+        print(f"error: --set: not a JSON object ({err})", file=sys.stderr)
+        return 1
+    except (CheckpointError, TrajectoryFormatError, FileNotFoundError) as err:
+        # A wrong --init name or path, a malformed data file: one line, no traceback.
+        print(f"error: {err}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -81,12 +91,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="training trajectories (HDF5; several files are pooled)")
     t.add_argument("--valid", help="validation trajectories (default: last 4 of --data)")
     t.add_argument("--config",
-                   help="preset name (push-cpu, push-finetune, push-scratch, toss-cpu, paper) or JSON file")
+                   help="preset name (push-cpu, push-finetune, push-scratch, toss-cpu, cube-real, paper) or JSON file")
     t.add_argument("--set", help='JSON overrides, e.g. \'{"training.steps": 500}\'')
     t.add_argument("--out", required=True, help="run folder (checkpoints, logs)")
     t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
     t.add_argument("--max-train", type=int, help="use only the first N training trajectories")
-    t.add_argument("--init", help="start from this checkpoint's weights (fine-tuning a new run)")
+    t.add_argument("--init", help="start from this checkpoint's weights (fine-tuning a new run): "
+                   "a checkpoint file or a pretrained name (push, toss, cube-real)")
     t.set_defaults(func=_train)
 
     e = sub.add_parser("evaluate", help="rollout metrics, plots and videos of a checkpoint")
