@@ -20,7 +20,7 @@ from fignet_gym.train.real import default_steps, free_flight_gravity, train_on_s
 from fignet_gym.train.training import Trainer, load_run_config
 
 TINY = {"simulator.latent_size": 8, "simulator.message_passing_steps": 1,
-        "training.batch_size": 2, "training.valid_trajectories": 2}
+        "training.batch_size": 2, "training.valid_trajectories": 2, "training.valid_horizon": 20}
 
 
 def cube_tosses(n: int, gravity: float, poses: int = 40, seed: int = 0) -> list[Trajectory]:
