@@ -134,3 +134,10 @@ def test_learned_models_scene_is_the_imported_datas() -> None:
     np.testing.assert_allclose(ours.object_props, imported.object_props, rtol=1e-6)
     np.testing.assert_allclose(ours.ref_vertices, imported.ref_vertices, atol=1e-6)
     np.testing.assert_allclose(ours.node_positions(ours.static_poses), imported.node_positions(imported.static_poses), atol=1e-6)
+
+
+def test_a_long_toss_accepts_a_checkpoint_dt_stored_to_nine_digits() -> None:
+    # 148 learned steps of a dt rounded to 1e-9 s miss 1 s by ~5e-6 steps: still whole steps.
+    sim = quiet_simulator("cube-real", dt=round(DATA_DT, 9))
+    env = CubeTossEnv(dynamics="fignet", checkpoint=sim)
+    assert env.dynamics.learned_steps(env.model, env.nstep) == 148

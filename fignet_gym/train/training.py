@@ -376,7 +376,9 @@ class Trainer:
         else:
             if resume:
                 print(f"--resume: no {last}, starting a new run")
-            config = SimulatorConfig.from_dict({**sim_cfg, "dt": dts.pop()})
+            # The data's own dt, not its rounding: a step spanning many learned steps (an env's
+            # 1 s toss of 148 steps of 1/148 s) must divide exactly.
+            config = SimulatorConfig.from_dict({**sim_cfg, "dt": float(train[0].dt)})
             blob = None
         mesh_opts = config.mesh_options
         from fignet_gym.data.format import build_scene
