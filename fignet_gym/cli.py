@@ -55,6 +55,23 @@ def _ship(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sim2real(args: argparse.Namespace) -> int:
+    from fignet_gym.data.format import TrajectoryFormatError
+    from fignet_gym.train.sim2real import default_train, parse_sizes, run_sim2real
+
+    try:
+        overrides = dict(json.loads(args.set)) if args.set else None
+        run_sim2real(args.data, args.out, parse_sizes(args.sizes), fractions=args.fractions,
+                     seed=args.seed, horizon=args.horizon, resume=args.resume,
+                     fit_evaluations=args.fit_evaluations, fit_trajectories=args.fit_trajectories,
+                     train_fn=default_train(args.config, args.budget, overrides, args.init),
+                     fignet=not args.no_fignet)
+    except (TrajectoryFormatError, FileNotFoundError, ValueError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def _bench(args: argparse.Namespace) -> int:
     from fignet_gym.tools.bench import run
 
@@ -134,6 +151,29 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--dest", help="folder (default: the package's pretrained/)")
     s.add_argument("--notes", default="", help="extra Markdown for the card")
     s.set_defaults(func=_ship)
+
+    r = sub.add_parser("sim2real", help="nominal and fitted MuJoCo vs FIGNet at several training-set "
+                       "sizes on real trajectories (split, fit, train, table, plot; resumable)")
+    r.add_argument("--data", required=True, help="trajectory file (e.g. from import-contactnets)")
+    r.add_argument("--out", required=True, help="run folder")
+    r.add_argument("--sizes", nargs="+", default=["8", "16", "32", "64", "128", "all"],
+                   help="FIGNet training-set sizes (first k of the training split; 'all')")
+    r.add_argument("--resume", action="store_true", help="continue a run in OUT")
+    r.add_argument("--fractions", type=float, nargs=3, default=[0.6, 0.2, 0.2],
+                   metavar=("TRAIN", "VALID", "TEST"))
+    r.add_argument("--seed", type=int, default=0, help="split, fit and training seed")
+    r.add_argument("--horizon", type=int, default=50, help="frame of the headline errors (from 0)")
+    r.add_argument("--fit-evaluations", type=int, default=240,
+                   help="CMA-ES candidates per friction cone")
+    r.add_argument("--fit-trajectories", type=int, default=64,
+                   help="training trajectories each candidate replays")
+    r.add_argument("--config", default="cube-real", help="FIGNet training preset or JSON")
+    r.add_argument("--budget", type=int, default=None,
+                   help="optimiser steps per FIGNet run (default: the recipe's, by size)")
+    r.add_argument("--init", default=None, help="warm-start FIGNet from a checkpoint or pretrained name")
+    r.add_argument("--set", help='JSON overrides of the training config, e.g. \'{"training.lr": 5e-4}\'')
+    r.add_argument("--no-fignet", action="store_true", help="MuJoCo stages only")
+    r.set_defaults(func=_sim2real)
 
     register_data(sub)
     return p

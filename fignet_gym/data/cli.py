@@ -112,6 +112,15 @@ def _split(args: argparse.Namespace) -> int:
     return 0
 
 
+def _mit_standin(args: argparse.Namespace) -> int:
+    from fignet_gym.data.standin import write_mit_standin
+
+    files = write_mit_standin(args.out, args.num, args.seed, penetration=args.penetration,
+                              position_noise=args.noise)
+    print(f"wrote {len(files)} stand-in MIT pushes (raw JSON) into {args.out}")
+    return 0
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the data subcommands to ``subparsers`` (of the ``fignet-gym`` parser)."""
     from fignet_gym.data.generate import KINDS
@@ -186,6 +195,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--floor-half-size", type=float, default=2.0, help="floor plane half-size (m)")
     c.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
     c.set_defaults(func=_guarded(_import_contactnets))
+
+    ms = subparsers.add_parser("mit-standin", help="stand-in MIT Pushing raw files (MuJoCo pushes "
+                               "with per-push friction, tracking noise and pusher penetration)")
+    ms.add_argument("--out", required=True, help="folder for the raw .json pushes")
+    ms.add_argument("--num", type=int, default=120)
+    ms.add_argument("--seed", type=int, default=0)
+    ms.add_argument("--noise", type=float, default=5e-4, help="object tracking noise (m)")
+    ms.add_argument("--penetration", type=float, default=1e-3,
+                    help="how much thinner the simulated tip is than the imported scene's (m)")
+    ms.set_defaults(func=_guarded(_mit_standin))
 
     sp = subparsers.add_parser("split", help="seeded train/valid/test split of a trajectory file")
     sp.add_argument("data")

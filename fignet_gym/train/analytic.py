@@ -40,7 +40,8 @@ class ContactParams:
         cone: ``"pyramidal"`` or ``"elliptic"``. impratio: MuJoCo's ``impratio``.
         noslip_iterations: MuJoCo's ``noslip_iterations``.
         gravity: z component (m/s^2).
-        substeps: MuJoCo timesteps per data step (timestep = ``dt / substeps``).
+        substeps: MuJoCo timesteps per data step (timestep = ``dt / substeps``; ``None``: the
+            MJCF's timestep, rounded so that it divides ``dt``).
         integrator: ``"Euler"``, ``"implicitfast"``, ``"RK4"`` ... (``mjtIntegrator`` names).
     """
 
@@ -54,13 +55,13 @@ class ContactParams:
     impratio: float | None = None
     noslip_iterations: int | None = None
     gravity: float | None = None
-    substeps: int = 4
+    substeps: int | None = None
     integrator: str | None = None
 
     def __post_init__(self) -> None:
         if self.cone is not None and self.cone not in CONES:
             raise ValueError(f"cone must be one of {CONES}, got {self.cone!r}")
-        if int(self.substeps) < 1:
+        if self.substeps is not None and int(self.substeps) < 1:
             raise ValueError(f"substeps must be >= 1, got {self.substeps}")
 
     def to_json(self) -> dict[str, Any]:
@@ -106,8 +107,14 @@ class ContactParams:
             model.opt.gravity[:] = (0.0, 0.0, self.gravity)
         if self.integrator is not None:
             model.opt.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{self.integrator.upper()}")
-        model.opt.timestep = dt / int(self.substeps)
+        model.opt.timestep = dt / self.substeps_for(model, dt)
         return model
+
+    def substeps_for(self, model: mujoco.MjModel, dt: float) -> int:
+        """``substeps``, or the MJCF's own: ``round(dt / timestep)`` (at least 1)."""
+        if self.substeps is not None:
+            return int(self.substeps)
+        return max(1, int(round(dt / model.opt.timestep)))
 
 
 def _axis_angle(q: np.ndarray) -> np.ndarray:
@@ -171,10 +178,12 @@ class Replay:
         self._model: mujoco.MjModel | None = None
         self._data: mujoco.MjData | None = None
         self._params: ContactParams | None = None
+        self.substeps = 1
 
     def model(self, params: ContactParams) -> mujoco.MjModel:
         """A copy of the MJCF's model with ``params`` applied (cached for repeated calls)."""
         if self._model is None or params != self._params:
+            self.substeps = params.substeps_for(self.base, self.traj.dt)
             self._model = params.apply(_copy_model(self.base), self.traj.dt)
             self._data = mujoco.MjData(self._model)
             self._params = params
@@ -220,7 +229,7 @@ class Replay:
             control[:, 3 * m:3 * m + 3] = poses[k + 1:T, o, :3]
             control[:, 3 * nm + 4 * m:3 * nm + 4 * m + 4] = poses[k + 1:T, o, 3:]
         states = dynamics.rollout(model, state[None], control[None] if nm else None,
-                                  T - 1 - k, frame_skip=int(params.substeps))[0]
+                                  T - 1 - k, frame_skip=self.substeps)[0]
         for o in dyn:
             out[k + 1:, o] = states[:, 1 + qadr[o]:1 + qadr[o] + 7]
         for o in kin:

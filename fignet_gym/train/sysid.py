@@ -32,8 +32,9 @@ TRANSLATION_SCALE, ROTATION_SCALE = 0.01, 10.0
 #: Per-frame errors are clipped at this many scales, so a few tosses that land on another face
 #: (90+ degrees) do not decide the fit alone.
 CLIP = 10.0
-#: Candidate substeps (MuJoCo timesteps per data step), chosen on validation.
-SUBSTEPS = (2, 4, 8)
+#: Candidate substeps (MuJoCo timesteps per data step) as multiples of the MJCF's own, chosen on
+#: validation.
+SUBSTEP_FACTORS = (0.5, 1.0, 2.0)
 
 
 @dataclass(frozen=True)
@@ -70,6 +71,8 @@ DEFAULT_SPACE: tuple[Dimension, ...] = (
 )
 #: Searched with the elliptic cone only (it has no effect on the pyramidal one's solution).
 ELLIPTIC_ONLY: tuple[Dimension, ...] = (Dimension("impratio", 1.0, 30.0),)
+#: Searched when the scenes have kinematic objects (a pusher's own friction).
+KINEMATIC_ONLY: tuple[Dimension, ...] = (Dimension("friction_kinematic", 0.02, 1.5),)
 
 
 def _angle_deg(q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
@@ -155,9 +158,9 @@ def _nominal_value(base: ContactParams, d: Dimension, model_value: float) -> flo
 
 def fit_contact_params(
     train: Sequence[Trajectory], valid: Sequence[Trajectory], out: str | os.PathLike | None = None,
-    *, base: ContactParams | None = None, space: Sequence[Dimension] = DEFAULT_SPACE,
+    *, base: ContactParams | None = None, space: Sequence[Dimension] | None = None,
     cones: Sequence[str] = CONES, evaluations: int = 240, fit_trajectories: int = 64,
-    given: int = 3, horizon: int = 50, seed: int = 0, substeps: Sequence[int] = SUBSTEPS,
+    given: int = 3, horizon: int = 50, seed: int = 0, substeps: Sequence[int] | None = None,
     progress: bool = True,
 ) -> dict[str, Any]:
     """Fit :class:`ContactParams` to ``train`` by CMA-ES, one run per friction cone; select on
@@ -166,8 +169,12 @@ def fit_contact_params(
     Args:
         base: fixed settings (substeps, integrator ...) and the start of the search (default:
             the MJCF's own values, i.e. the data's nominal friction and restitution).
+        space: searched parameters (default :data:`DEFAULT_SPACE`, plus
+            :data:`KINEMATIC_ONLY` when the scenes have kinematic objects).
         evaluations: CMA-ES candidates per cone (each replays ``fit_trajectories`` training
             trajectories, a seeded sample of ``train``).
+        substeps: candidates chosen on validation (default: :data:`SUBSTEP_FACTORS` times the
+            MJCF's own, i.e. ``base.substeps`` or ``dt / timestep``).
         out: JSON file of the result; a finished run there is returned as is (resumable per cone:
             each finished cone is kept in ``<out>.partial.json``).
 
@@ -192,9 +199,13 @@ def fit_contact_params(
     fit_set = ReplaySet([train[i] for i in pick], given, horizon)
     valid_set = ReplaySet(valid, given, horizon)
     m0 = fit_set.replays[0].base
+    if space is None:
+        space = DEFAULT_SPACE + (KINEMATIC_ONLY if m0.nmocap else ())
+    kin_geoms = [g for g in range(m0.ngeom) if m0.body_mocapid[m0.geom_bodyid[g]] >= 0]
     start = {"friction": float(m0.geom_friction[0, 0]), "torsional": float(m0.geom_friction[0, 1]),
              "timeconst": float(m0.geom_solref[0, 0]), "dampratio": float(m0.geom_solref[0, 1]),
-             "gravity": float(m0.opt.gravity[2]), "impratio": float(m0.opt.impratio)}
+             "gravity": float(m0.opt.gravity[2]), "impratio": float(m0.opt.impratio),
+             "friction_kinematic": float(m0.geom_friction[kin_geoms[0], 0]) if kin_geoms else 0.2}
     t0 = time.process_time()
     runs = partial.get("cone_runs", [])
     done = {r["cone"] for r in runs}
@@ -240,6 +251,11 @@ def fit_contact_params(
     best = min(((r, c) for r in runs for c in r["candidates"].values()),
                key=lambda rc: rc[1]["valid_loss"])
     chosen = ContactParams.from_json(best[1]["params"])
+    n0 = base.substeps_for(m0, valid[0].dt)
+    if substeps is None:
+        substeps = sorted({max(1, int(round(n0 * f))) for f in SUBSTEP_FACTORS})
+    if chosen.substeps is None:
+        chosen = replace(chosen, substeps=n0)
     sub_res = {}
     for n in substeps:  # the timestep, chosen on validation with the other parameters fixed
         p = replace(chosen, substeps=int(n))
