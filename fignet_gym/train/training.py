@@ -103,8 +103,8 @@ class TrainConfig:
         return TrainConfig(**d)
 
 
-# Latent 64, 5 message-passing steps, no mesh-mesh edges (FIGNet*): ~4x cheaper per graph than
-# the paper's size on these CPUs, which buys more graphs per CPU hour.
+# Latent 64, 5 message-passing steps, no mesh-mesh edges (FIGNet*): cheaper per graph than the
+# paper's size, so a CPU budget sees more graphs (docs/experiments.md, "Speed").
 _CPU_SIZE = dict(latent_size=64, message_passing_steps=5, mesh_edges=False)
 # The pusher is meshed as an octagonal prism (0.4 mm from its true 4.75 mm radius): fewer faces.
 _PUSH_SCENE = dict(_CPU_SIZE, collision_radius=0.01, vertical_weight=0.1, scene_type="push",
@@ -113,29 +113,28 @@ _PUSH_SCENE = dict(_CPU_SIZE, collision_radius=0.01, vertical_weight=0.1, scene_
 _PUSH_MODEL = dict(_PUSH_SCENE, noise_std=5e-5, rotation_noise_std=5e-3, next_separation=True)
 
 PRESETS: dict[str, dict[str, dict[str, Any]]] = {
+    # A push model from scratch on a CPU budget: the CPU size, one-step training only.
     "push-cpu": {"simulator": dict(_PUSH_SCENE), "training": dict(batch_size=8, valid_horizon=25)},
     # The last stage of the shipped push model (see its model card), for fine-tuning a trained
-    # push model (--init): pushforward from step 0 at a low learning rate. From scratch it does
-    # badly: a random model's pushforward states are junk (measured: 3x the no-motion error after
-    # 0.3 CPU hours; push-cpu's first run was at 0.6x after 0.1).
+    # push model (--init): pushforward from step 0 at a low learning rate. Not for training from
+    # scratch: a random model's pushforward states are junk to learn from.
     "push-finetune": {"simulator": dict(_PUSH_MODEL),
                       "training": dict(batch_size=16, lr=1e-4, lr_final=1e-5, unroll_steps=6,
                                        rigid_loss_weight=3.0, valid_every=500, valid_trajectories=100,
                                        valid_horizon=25)},
-    # From scratch: push-finetune's model with the rigid output projection, a higher learning rate
-    # and plain one-step training before pushforward (from step 1500). Not yet a shipped model's
-    # recipe: on 10000 pushes it reached the shipped push model's validation errors within ~10%
-    # at about half its CPU hours (README, "Model size").
+    # A push model from scratch: push-finetune's model with the rigid output projection, a higher
+    # learning rate and plain one-step training before pushforward (from step 1500). No shipped
+    # model was trained with it (docs/experiments.md, "Pushing from scratch").
     "push-scratch": {"simulator": dict(_PUSH_MODEL, rigid_output=True),
                      "training": dict(steps=40_000, batch_size=16, lr=5e-4, lr_final=1e-5, unroll_steps=6,
                                       unroll_after=1500, rigid_loss_weight=3.0, valid_every=1000,
                                       valid_trajectories=100, valid_horizon=25)},
-    # Pushforward (up to 3 steps) once 5000 plain steps have taught the model something, the
-    # weight average, and the rigid output projection. The shipped toss model is one run of this
-    # preset (its model card names the step).
+    # Tossing from scratch, the shipped toss model's recipe (one run of this preset; its model card
+    # names the step): gravity prior, rigid output projection, pushforward (up to 3 steps) once
+    # 5000 plain steps have taught the model something.
     "toss-cpu": {"simulator": dict(_CPU_SIZE, collision_radius=0.1, scene_type="toss",
                                    gravity=(0.0, 0.0, -10.0), feature_clip=3.0, rigid_output=True),
-                 # Selection on 50 validation tosses: 10-15% differences on 16 were noise.
+                 # Select on 50 validation tosses: fewer are too noisy to rank checkpoints.
                  "training": dict(steps=40_000, batch_size=4, lr=1e-3, lr_final=3e-5, unroll_steps=3,
                                   unroll_after=5000, valid_every=2000, valid_trajectories=50)},
     # Real tracked tosses of one 10.5 cm cube (ContactNets, ``fignet-gym import-contactnets``) at
@@ -150,6 +149,7 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
                                     rigid_output=True),
                   "training": dict(steps=12_000, batch_size=16, lr=1e-3, lr_final=3e-5,
                                    valid_every=500, valid_trajectories=80)},
+    # The paper's model size (latent 128, 10 message-passing steps, mesh-mesh edges), for comparison.
     "paper": {"simulator": dict(latent_size=128, message_passing_steps=10, mesh_edges=True),
               "training": dict(batch_size=8)},
 }
