@@ -113,3 +113,31 @@ def test_vector_env_equals_single_envs() -> None:
         o, r, *_ = e.step(acts[i])
         np.testing.assert_array_equal(obs[i], o)
         assert rew[i] == pytest.approx(r)
+
+
+def test_learned_models_scene_is_the_imported_datas() -> None:
+    # The learned model's inputs (node layout, mass, friction, restitution) must be those of the
+    # data it was trained on: import-contactnets on the shipped 4-toss sample.
+    from pathlib import Path
+
+    from fignet_gym.data.format import build_scene
+    from fignet_gym.data.tracked import read_contactnets
+
+    sample = Path(__file__).parent / "data" / "contactnets_sample"
+    traj = next(iter(read_contactnets(sample)))
+    assert traj.dt == pytest.approx(DATA_DT)
+    imported = build_scene(traj)
+    env = CubeTossEnv(dynamics="fignet", checkpoint=_quick_sim())
+    ours = Scene.from_mjmodel(env.model)
+    assert ours.object_names == imported.object_names
+    np.testing.assert_array_equal(ours.object_kind, imported.object_kind)
+    np.testing.assert_allclose(ours.object_props, imported.object_props, rtol=1e-6)
+    np.testing.assert_allclose(ours.ref_vertices, imported.ref_vertices, atol=1e-6)
+    np.testing.assert_allclose(ours.node_positions(ours.static_poses), imported.node_positions(imported.static_poses), atol=1e-6)
+
+
+def test_a_long_toss_accepts_a_checkpoint_dt_stored_to_nine_digits() -> None:
+    # 148 learned steps of a dt rounded to 1e-9 s miss 1 s by ~5e-6 steps: still whole steps.
+    sim = quiet_simulator("cube-real", dt=round(DATA_DT, 9))
+    env = CubeTossEnv(dynamics="fignet", checkpoint=sim)
+    assert env.dynamics.learned_steps(env.model, env.nstep) == 148
