@@ -100,7 +100,7 @@ Mesh options: {c.mesh_options}.
 {notes.rstrip()}
 
 ## Scores on held-out data (`{data}`, {m["trajectories"]} trajectories)
-Rollouts from the first {c.history + 1} true poses; errors after {m["horizon_step"]} steps
+Rollouts from the first {c.history + 1} true poses; errors at frame {m["horizon_step"]} counted from frame 0
 ({m["seconds"]:.2f} s), medians over trajectories.
 
 | model | translation RMSE (m) | rotation error (deg) |
