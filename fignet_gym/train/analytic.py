@@ -181,11 +181,20 @@ class Replay:
         self.substeps = 1
 
     def model(self, params: ContactParams) -> mujoco.MjModel:
-        """A copy of the MJCF's model with ``params`` applied (cached for repeated calls)."""
-        if self._model is None or params != self._params:
-            self.substeps = params.substeps_for(self.base, self.traj.dt)
-            self._model = params.apply(_copy_model(self.base), self.traj.dt)
+        """The MJCF's model with ``params`` applied: one copy per replay, reset to the MJCF's
+        values and updated in place (a new model per candidate would cost memory and time)."""
+        if self._model is None:
+            self._model = _copy_model(self.base)
             self._data = mujoco.MjData(self._model)
+        if params != self._params:
+            m, b = self._model, self.base
+            m.geom_friction[:] = b.geom_friction
+            m.geom_solref[:] = b.geom_solref
+            m.opt.gravity[:] = b.opt.gravity
+            for key in ("cone", "impratio", "noslip_iterations", "integrator", "timestep"):
+                setattr(m.opt, key, getattr(b.opt, key))
+            self.substeps = params.substeps_for(b, self.traj.dt)
+            params.apply(m, self.traj.dt)
             self._params = params
         return self._model
 

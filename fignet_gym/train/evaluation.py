@@ -140,15 +140,16 @@ def free_flight_mask(scene: Scene, true: Tensor, margin: float) -> Tensor:
     """
     nodes = scene.node_positions(true)  # [T, N, 3]
     T, n_obj = true.shape[0], scene.num_objects
-    low = torch.full((T, n_obj), math.inf).index_reduce_(1, scene.node_object, nodes[..., 2], "amin")
+    idx = scene.node_object[None].expand(T, -1)
+    low = torch.full((T, n_obj), math.inf).scatter_reduce_(1, idx, nodes[..., 2], "amin")
     com = scene.com_positions(true)  # [T, O, 3]
     ref_nodes = scene.node_positions(scene.static_poses[None].to(true))[0]
     ref_com = scene.com_positions(scene.static_poses[None].to(true))[0]
     d = (ref_nodes - ref_com[scene.node_object]).norm(dim=-1)
-    radius = torch.zeros(n_obj).index_reduce_(0, scene.node_object, d, "amax", include_self=False)
+    radius = torch.zeros(n_obj).scatter_reduce_(0, scene.node_object, d, "amax", include_self=False)
     # floors: static objects whose nodes are all on z = 0 (the ground plane)
-    high = torch.full((n_obj,), -math.inf).index_reduce_(0, scene.node_object,
-                                                    nodes[0, :, 2].abs(), "amax")
+    high = torch.full((n_obj,), -math.inf).scatter_reduce_(0, scene.node_object,
+                                                          nodes[0, :, 2].abs(), "amax")
     floor = (scene.object_kind == ObjectKind.STATIC) & (high < 1e-6)
     free = (low > margin) & scene.dynamic_mask
     same = scene.object_scene[:, None] == scene.object_scene[None]
@@ -690,9 +691,3 @@ def _label(frame: np.ndarray, text: str) -> np.ndarray:
     draw.rectangle((0, 0, 8 + 7 * len(text), 20), fill=(0, 0, 0))
     draw.text((4, 4), text, fill=(255, 255, 255))
     return np.asarray(img)
-
-
-def rollout_errors_tensor(pred: Tensor, true: Tensor, scene: Scene) -> Tensor:
-    """Convenience: ``float[T, 2]`` (translation m, rotation deg) for one scene."""
-    tr, rot = errors(scene, pred, true)
-    return torch.stack((tr[:, 0], rot[:, 0]), -1)
