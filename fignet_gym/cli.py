@@ -10,8 +10,7 @@ from collections.abc import Sequence
 
 def _train(args: argparse.Namespace) -> int:
     from fignet_gym.data.format import TrajectoryFormatError
-    from fignet_gym.simulator.model import CheckpointError
-    from fignet_gym.train.training import train_from_files
+    from fignet_gym.train.training import CheckpointError, train_from_files
 
     try:
         overrides = dict(json.loads(args.set)) if args.set else {}
