@@ -16,7 +16,7 @@ from gymnasium.vector import AutoresetMode
 from fignet_gym.dynamics import Dynamics
 from fignet_gym.envs.base import MjDynamicsEnv, add_disc, layout, layout_size
 from fignet_gym.envs.vector import BatchedVectorEnv
-from fignet_gym.simulator.scene import restitution_to_dampratio
+from fignet_gym.mjcf import restitution_to_dampratio
 
 #: The ContactNets cube (``params_processed/experiment.json``, lengths in metres): half-width,
 #: mass (kg), principal inertia (kg m^2), nominal friction and restitution; the data's step (s).
