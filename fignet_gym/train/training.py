@@ -34,8 +34,7 @@ from fignet_gym.data.format import Trajectory, build_scene, load_trajectories
 from fignet_gym.pretrained import load_checkpoint
 from fignet_gym.simulator.geometry import quat_mul
 from fignet_gym.simulator.graph import FACE_BASE, FACE_GROUPS
-# CheckpointError: re-exported for the CLI (which may import train, not simulator).
-from fignet_gym.simulator.model import CheckpointError, LearnedSimulator, SimulatorConfig  # noqa: F401
+from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
 from fignet_gym.simulator.scene import Scene
 
 # Training settings of retired experiments and the one value each still accepts (as
