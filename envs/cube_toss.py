@@ -208,7 +208,7 @@ class CubeTossEnv(MjDynamicsEnv):
     |---|---|---|
     | dynamics | ``"mujoco"`` | ``"mujoco"`` (fitted), ``"fignet"`` (``cube-real``) or a ``Dynamics`` object |
     | checkpoint | ``None`` | ``"fignet"``: path, name or ``LearnedSimulator`` (default ``cube-real``) |
-    | mujoco_params | ``"fitted"`` | ``"fitted"``, ``"nominal"``, JSON file, dict (:func:`mujoco_parameters`) |
+    | mujoco_params | ``"fitted"`` | ``"fitted"``, ``"nominal"``, a JSON path or a dict |
     | settle_steps | ``148`` | learned steps of 6.76 ms per toss (1 s) |
     | release_position | ``(0.0, 0.0, 0.14)`` | where the cube is released (m; the rig's median height) |
     | speed_range | ``(1.0, 1.27)`` | horizontal release speed at action -1 and +1 (m/s) |
