@@ -19,7 +19,8 @@ def test_shipped_models_load_offline_with_model_cards() -> None:
         assert f'load_pretrained("{name}")' in card and "CPU hours" in card
 
 
-@pytest.mark.parametrize("preset, name", [("push-finetune", "push"), ("toss-cpu", "toss")])
+@pytest.mark.parametrize("preset, name", [("push-finetune", "push"), ("toss-cpu", "toss"),
+                                          ("cube-real", "cube-real")])
 def test_presets_are_the_shipped_models_recipes(preset: str, name: str) -> None:
     from fignet_gym.train.training import PRESETS
 
