@@ -430,6 +430,12 @@ def _prepare_dir(root: Path, resume: bool, force: bool) -> bool:
         return True
     if resume and not (root / "config.json").exists():
         raise RunError(f"{root}: nothing to resume (no config.json); start it without --resume")
+    if resume:
+        # Stopped before its first checkpoint: start again, without the stopped process's logs.
+        for item in root.iterdir():
+            if item.name != "config.json":
+                shutil.rmtree(item) if item.is_dir() else item.unlink()
+        return False
     if root.exists() and any(root.iterdir()) and not resume:
         if not force:
             raise RunError(f"{root} exists: pass --resume to continue it or --force to overwrite it")
