@@ -426,6 +426,8 @@ class _Stop(Exception):
 # ----------------------------------------------------------------------------- the run
 def _prepare_dir(root: Path, resume: bool, force: bool) -> bool:
     """Whether to resume; creates ``root``. ``RunError`` for an existing folder without a flag."""
+    if resume and not (root / "checkpoint").exists() and (root / "checkpoint.old").exists():
+        (root / "checkpoint.old").rename(root / "checkpoint")  # killed between the two renames
     if resume and (root / "checkpoint" / "state.pt").exists():
         return True
     if resume and not (root / "config.json").exists():

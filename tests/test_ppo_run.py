@@ -168,3 +168,35 @@ def test_finished_run_can_be_extended(tmp_path: Path) -> None:
     assert run_ppo(out, more, resume=True, progress=False)["timesteps"] == 64
     assert steps(out / "progress.csv") == [32, 64]
     shutil.rmtree(out)
+
+
+@pytest.mark.slow
+def test_killed_process_resumes(tmp_path: Path) -> None:
+    """SIGKILL a `fignet-gym ppo` process after its first checkpoint; --resume completes it."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "run"
+    args = [sys.executable, "-m", "fignet_gym.cli", "ppo", "--env", PUSH, "--dynamics", "mujoco",
+            "--steps", "4096", "--out", str(out), "--num-envs", "2", "--n-steps", "16",
+            "--batch-size", "16", "--n-epochs", "1", "--eval-every", "0", "--final-episodes", "1",
+            "--checkpoint-every", "64", "--quiet"]
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    proc = subprocess.Popen(args, env=env)
+    try:
+        while not (out / "checkpoint" / "state.pt").exists():
+            assert proc.poll() is None, "the run ended before its first checkpoint"
+            time.sleep(0.2)
+        time.sleep(1.0)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    done = torch.load(out / "checkpoint" / "state.pt", weights_only=False)["num_timesteps"]
+    assert 64 <= done < 4096
+    subprocess.run([*args, "--resume"], env=env, check=True, capture_output=True)
+    rows = steps(out / "progress.csv")
+    assert rows == list(range(32, 4096 + 1, 32))
+    assert json.loads((out / "final_eval.json").read_text())["timesteps"] == 4096
