@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from fignet_gym.agents.ppo import PPOConfig
-from fignet_gym.agents.ppo_run import RunConfig, RunError, run_ppo, transfer_table
+from fignet_gym.agents.ppo_run import RunConfig, RunError, plot_curves, run_ppo, transfer_table
 
 
 def _error(message: str) -> int:
@@ -77,4 +77,6 @@ def ppo_table_command(args: argparse.Namespace) -> int:
     print(table)
     if args.out:
         Path(args.out).write_text(table + "\n")
+    if args.plot:
+        print(f"curves: {plot_curves(args.runs, args.plot)}")
     return 0

@@ -583,3 +583,38 @@ def transfer_table(runs: Sequence[str | os.PathLike]) -> str:
             f"{f['success_rate']:.0%} | {f['mean_return']:.1f} | {m['n_episodes']} / {f['n_episodes']} |"
         )
     return "\n".join(lines)
+
+
+def plot_curves(runs: Sequence[str | os.PathLike], path: str | os.PathLike) -> Path:
+    """Periodic evaluation of each run (``eval.csv``): success rate and return vs training steps.
+
+    One line per run and evaluation dynamics (solid: MuJoCo, dashed: FIGNet); saved as an image.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    for i, run in enumerate(runs):
+        rows = read_csv(Path(run) / "eval.csv")
+        if not rows:
+            continue
+        trained = json.loads((Path(run) / "config.json").read_text())["dynamics"]
+        x = [int(r["step"]) for r in rows]
+        for dyn, style in (("mujoco", "-"), ("fignet", "--")):
+            for ax, key in zip(axes, ("success_rate", "mean_return"), strict=True):
+                ax.plot(x, [float(r[f"{dyn}/{key}"]) for r in rows], style, color=f"C{i}",
+                        label=f"trained on {trained}, eval on {dyn}")
+    axes[0].set_ylabel("success rate")
+    axes[1].set_ylabel("mean episode return (env reward)")
+    for ax in axes:
+        ax.set_xlabel("training environment steps")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

@@ -164,6 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
     o = sub.add_parser("ppo-table", help="transfer table of finished PPO runs (trained on x evaluated on)")
     o.add_argument("runs", nargs="+", help="run folders of `fignet-gym ppo`")
     o.add_argument("--out", help="also write the Markdown table to this file")
+    o.add_argument("--plot", help="also plot the runs' periodic evaluations to this image")
     o.set_defaults(func=_ppo_table)
 
     register_data(sub)

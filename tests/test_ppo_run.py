@@ -116,8 +116,10 @@ def test_transfer_table_rows_and_cli(stopped_and_resumed: dict, capsys: pytest.C
     m, f = res["eval"]["mujoco"], res["eval"]["fignet"]
     assert row.startswith("| mujoco (run) | 128 |")
     assert f"| {m['mean_return']:.1f} |" in row and f"| {f['mean_return']:.1f} |" in row
-    assert main(["ppo-table", str(root), "--out", str(root / "table.md")]) == 0
-    assert capsys.readouterr().out.strip() == table
+    assert main(["ppo-table", str(root), "--out", str(root / "table.md"),
+                 "--plot", str(root / "curves.png")]) == 0
+    assert capsys.readouterr().out.strip().splitlines()[:-1] == table.splitlines()
+    assert (root / "curves.png").stat().st_size > 10_000
     assert (root / "table.md").read_text().strip() == table
     assert main(["ppo-table", str(root.parent / "missing")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
