@@ -2,7 +2,8 @@
 
 Planners (:mod:`~fignet_gym.agents.planners`) plan Push-v0 tip motions by batched rollouts of any
 :class:`~fignet_gym.dynamics.Dynamics`; the PPO helpers (:mod:`~fignet_gym.agents.ppo`) train
-stable-baselines3 PPO on either dynamics and check a policy on another.
+stable-baselines3 PPO on either dynamics and check a policy on another; :mod:`~fignet_gym.agents.ppo_run`
+is ``fignet-gym ppo`` (resumable run folders, evaluation on both dynamics, the transfer table).
 """
 
 from fignet_gym.agents.planners import (
@@ -22,6 +23,13 @@ from fignet_gym.agents.ppo import (
     save_policy,
     train_ppo,
 )
+from fignet_gym.agents.ppo_run import (
+    NormalizedPolicy,
+    RunConfig,
+    load_run_policy,
+    run_ppo,
+    transfer_table,
+)
 from fignet_gym.agents.task import PLAN_STATE_SPEC, PushTask, plan_state
 
 __all__ = [
@@ -31,14 +39,19 @@ __all__ = [
     "CEMPlanner",
     "MPPIConfig",
     "MPPIPlanner",
+    "NormalizedPolicy",
     "PPOConfig",
     "PlanInfo",
     "PushTask",
+    "RunConfig",
     "SamplingPlanner",
     "evaluate_policy_on",
+    "load_run_policy",
     "load_policy",
     "plan_state",
     "run_episode",
+    "run_ppo",
     "save_policy",
     "train_ppo",
+    "transfer_table",
 ]

@@ -141,8 +141,8 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--simulator", help="learned simulator: pretrained name or checkpoint (default: "
                    "the pretrained one of the env's scene)")
     o.add_argument("--num-envs", type=int, default=32, help="sub-environments stepped as one batch")
-    o.add_argument("--n-steps", type=int, default=128, help="steps per sub-environment per update")
-    o.add_argument("--batch-size", type=int, default=512, help="PPO minibatch")
+    o.add_argument("--n-steps", type=int, default=64, help="steps per sub-environment per update")
+    o.add_argument("--batch-size", type=int, default=256, help="PPO minibatch")
     o.add_argument("--n-epochs", type=int, default=10, help="passes over each rollout")
     o.add_argument("--lr", type=float, default=3e-4, help="Adam learning rate")
     o.add_argument("--gamma", type=float, default=0.99, help="discount")
@@ -150,7 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--net-arch", default="64,64", help="hidden sizes of policy and value MLPs")
     o.add_argument("--no-normalize", action="store_true",
                    help="no VecNormalize of observations and rewards")
-    o.add_argument("--eval-every", type=int, default=50_000,
+    o.add_argument("--eval-every", type=int, default=25_000,
                    help="evaluate on both dynamics every N steps (0: never)")
     o.add_argument("--eval-episodes", type=int, default=32, help="episodes per periodic evaluation")
     o.add_argument("--final-episodes", type=int, default=50,
