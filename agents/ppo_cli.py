@@ -31,6 +31,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         gamma=args.gamma,
         ent_coef=args.ent_coef,
         net_arch=net_arch,
+        log_std_init=args.log_std_init,
         seed=args.seed,
     )
     return RunConfig(

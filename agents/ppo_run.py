@@ -117,7 +117,7 @@ class RunConfig:
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> RunConfig:
         """Inverse of :meth:`to_json`."""
-        ppo = dict(data["ppo"])
+        ppo = {**asdict(PPOConfig()), **data["ppo"]}
         ppo["net_arch"] = tuple(ppo["net_arch"])
         names = {f.name for f in fields(cls)}
         return cls(**{**{k: v for k, v in data.items() if k in names}, "ppo": PPOConfig(**ppo)})
@@ -516,7 +516,8 @@ def run_ppo(
                 gae_lambda=cfg.ppo.gae_lambda,
                 clip_range=cfg.ppo.clip_range,
                 ent_coef=cfg.ppo.ent_coef,
-                policy_kwargs={"net_arch": list(cfg.ppo.net_arch)},
+                policy_kwargs={"net_arch": list(cfg.ppo.net_arch),
+                               "log_std_init": cfg.ppo.log_std_init},
                 seed=cfg.ppo.seed,
                 device="cpu",  # a small MLP: a GPU would only add transfers
             )
