@@ -1,7 +1,7 @@
 """Agents: model-predictive planners and PPO helpers (installed as ``fignet_gym.agents``).
 
-Planners (:mod:`~fignet_gym.agents.planners`) plan Push-v0 tip motions by batched rollouts of any
-:class:`~fignet_gym.dynamics.Dynamics`; the PPO helpers (:mod:`~fignet_gym.agents.ppo`) train
+Planners (:mod:`~fignet_gym.agents.planners`) plan Push tip motions and Toss releases by batched
+rollouts of any :class:`~fignet_gym.dynamics.Dynamics`; the PPO helpers (:mod:`~fignet_gym.agents.ppo`) train
 stable-baselines3 PPO on either dynamics and check a policy on another.
 """
 
@@ -22,7 +22,15 @@ from fignet_gym.agents.ppo import (
     save_policy,
     train_ppo,
 )
-from fignet_gym.agents.task import PLAN_STATE_SPEC, PushTask, plan_state
+from fignet_gym.agents.task import (
+    PLAN_STATE_SPEC,
+    PlanningProblem,
+    PushProblem,
+    TossProblem,
+    check_same_scene,
+    plan_state,
+    problem_for,
+)
 
 __all__ = [
     "EVAL_KEYS",
@@ -33,11 +41,15 @@ __all__ = [
     "MPPIPlanner",
     "PPOConfig",
     "PlanInfo",
-    "PushTask",
+    "PlanningProblem",
+    "PushProblem",
+    "TossProblem",
+    "check_same_scene",
     "SamplingPlanner",
     "evaluate_policy_on",
     "load_policy",
     "plan_state",
+    "problem_for",
     "run_episode",
     "save_policy",
     "train_ppo",
