@@ -89,7 +89,7 @@ class PushEnv(MjDynamicsEnv):
     | goal_distance | ``0.05`` | goal drawn within this distance (m) of the object |
     | goal_distance_min | ``0.0`` | and at least this far (m; uniform over the annulus) |
     | goal_yaw | ``0.5`` | goal heading drawn within this angle (rad) of the object's |
-    | tip_start | ``"around"`` | ``"around"``: circling the corners; ``"behind"``: behind, away from the goal |
+    | tip_start | ``"around"`` | ``"around"``: circling the corners; ``"behind"``: opposite the goal |
     | tip_gap | ``0.005`` | ``"behind"``: clearance (m) between tip and outline |
     | tip_jitter | ``0.01`` | ``"behind"``: uniform sideways offset (m) of the start |
     | position_weight | ``10.0`` | reward weight of the position error (1/m) |
