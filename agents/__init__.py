@@ -1,7 +1,7 @@
 """Agents: model-predictive planners and PPO helpers (installed as ``fignet_gym.agents``).
 
-Planners (:mod:`~fignet_gym.agents.planners`) plan Push-v0 tip motions by batched rollouts of any
-:class:`~fignet_gym.dynamics.Dynamics`; the PPO helpers (:mod:`~fignet_gym.agents.ppo`) train
+Planners (:mod:`~fignet_gym.agents.planners`) plan Push tip motions and Toss releases by batched
+rollouts of any :class:`~fignet_gym.dynamics.Dynamics`; the PPO helpers (:mod:`~fignet_gym.agents.ppo`) train
 stable-baselines3 PPO on either dynamics and check a policy on another; :mod:`~fignet_gym.agents.ppo_run`
 is ``fignet-gym ppo`` (resumable run folders, evaluation on both dynamics, the transfer table).
 """
@@ -30,7 +30,15 @@ from fignet_gym.agents.ppo_run import (
     run_ppo,
     transfer_table,
 )
-from fignet_gym.agents.task import PLAN_STATE_SPEC, PushTask, plan_state
+from fignet_gym.agents.task import (
+    PLAN_STATE_SPEC,
+    PlanningProblem,
+    PushProblem,
+    TossProblem,
+    check_same_scene,
+    plan_state,
+    problem_for,
+)
 
 __all__ = [
     "EVAL_KEYS",
@@ -42,13 +50,17 @@ __all__ = [
     "NormalizedPolicy",
     "PPOConfig",
     "PlanInfo",
-    "PushTask",
+    "PlanningProblem",
+    "PushProblem",
     "RunConfig",
+    "TossProblem",
+    "check_same_scene",
     "SamplingPlanner",
     "evaluate_policy_on",
     "load_run_policy",
     "load_policy",
     "plan_state",
+    "problem_for",
     "run_episode",
     "run_ppo",
     "save_policy",

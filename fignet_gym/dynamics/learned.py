@@ -395,10 +395,12 @@ class FIGNetDynamics(DynamicsBase):
         """All ``B`` rollouts in one batched graph per learned step.
 
         Args:
-            initial_state: ``float64[B or 1, nstate]`` (``mjSTATE_FULLPHYSICS``); free-joint
-                velocities seed the history (constant-velocity back-extrapolation).
+            initial_state: ``float64[B or 1, nstate]`` (:data:`~fignet_gym.dynamics.STATE_SPEC`:
+                full physics and mocap poses); free-joint velocities seed the history
+                (constant-velocity back-extrapolation), mocap bodies start at rest at the state's
+                mocap poses (as :meth:`step` reseeds them).
             control: ``float64[B or 1, nstep, nmocap * 7]`` mocap targets (positions, then
-                quaternions); mocap bodies start at rest at ``control[:, 0]``.
+                quaternions).
             nstep: number of recorded states (default: ``control.shape[1]``).
             frame_skip: MuJoCo timesteps per recorded state; ``frame_skip * timestep`` must be a
                 whole number of learned steps.
@@ -414,8 +416,7 @@ class FIGNetDynamics(DynamicsBase):
         hists, times = [], []
         for b in range(B):
             mujoco.mj_setState(model, scratch, state[b], STATE_SPEC)
-            set_mocap(model, scratch, control[b, 0])
-            scratch.xquat[:] = 0.0  # mocap bodies start at control[:, 0]
+            scratch.xquat[:] = 0.0  # mocap bodies start at the state's mocap_pos / mocap_quat
             hists.append(self._seed(info, scratch, None, None))
             times.append(float(scratch.time))
         hist = torch.cat(hists, dim=1)
@@ -439,6 +440,7 @@ class FIGNetDynamics(DynamicsBase):
                 scratch.qpos[qa] = pose[b]
                 scratch.qvel[da] = vel[b]
                 scratch.time = state[b, 0] + (t + 1) * frame_skip * float(model.opt.timestep)
+                set_mocap(model, scratch, control[b, t])
                 mujoco.mj_getState(model, scratch, out[b, t], STATE_SPEC)
         return out
 

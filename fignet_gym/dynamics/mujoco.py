@@ -10,10 +10,11 @@ import numpy as np
 
 from fignet_gym.dynamics.base import (
     CONTROL_SPEC,
-    STATE_SPEC,
     DivergenceError,
     DynamicsBase,
     check_rollout_inputs,
+    join_state,
+    split_state,
 )
 
 _WARNINGS = (
@@ -77,15 +78,18 @@ class MujocoDynamics(DynamicsBase):
         """``mujoco.rollout`` on a persistent thread pool, one state per ``frame_skip`` timesteps.
 
         Args:
-            initial_state: ``float64[B or 1, nstate]`` (``mjSTATE_FULLPHYSICS``).
+            initial_state: ``float64[B or 1, nstate]`` (:data:`~fignet_gym.dynamics.STATE_SPEC`:
+                full physics and mocap poses).
             control: ``float64[B or 1, nstep, nmocap * 7]`` mocap targets (positions, then
                 quaternions): row ``t`` is reached linearly over the ``frame_skip`` timesteps of
-                step ``t``, from row ``t - 1`` (from the initial state's mocap pose for ``t = 0``).
+                step ``t``, from row ``t - 1`` (from the initial state's mocap pose for ``t = 0``),
+                exactly as :meth:`step` moves them.
             nstep: number of recorded states (default: ``control.shape[1]``).
             frame_skip: MuJoCo timesteps per recorded state (1: exactly ``mujoco.rollout``).
 
         Returns:
-            ``float64[B, nstep, nstate]`` the state after each ``frame_skip`` timesteps.
+            ``float64[B, nstep, nstate]`` the state after each ``frame_skip`` timesteps (its mocap
+            poses are the control rows: where the targets put them).
         """
         state, control, nstep = check_rollout_inputs(model, initial_state, control, nstep)
         if frame_skip < 1:
@@ -98,20 +102,16 @@ class MujocoDynamics(DynamicsBase):
         if datas is None:
             datas = [mujoco.MjData(model) for _ in range(max(self.nthread, 1))]
             self._scratch[model] = datas
+        phys, start = split_state(model, state)
         fine = control
         if frame_skip > 1 and model.nmocap:
-            start = np.empty((state.shape[0], control.shape[2]))
-            scratch = datas[0]
-            for b in range(state.shape[0]):
-                mujoco.mj_setState(model, scratch, state[b], STATE_SPEC)
-                start[b] = np.concatenate((scratch.mocap_pos.ravel(), scratch.mocap_quat.ravel()))
             fine = interpolate_mocap(start, control, frame_skip, model.nmocap)
         elif frame_skip > 1:
             fine = np.repeat(control, frame_skip, axis=1)
         out, _ = self._pool.rollout(
-            model, datas, state, fine, control_spec=CONTROL_SPEC, nstep=nstep * frame_skip
+            model, datas, phys, fine, control_spec=CONTROL_SPEC, nstep=nstep * frame_skip
         )
-        return np.ascontiguousarray(out[:, frame_skip - 1 :: frame_skip])
+        return join_state(model, out[:, frame_skip - 1 :: frame_skip], control)
 
     def close(self) -> None:
         """Stop the rollout thread pool."""
