@@ -1,6 +1,6 @@
 """PPO on learned dynamics: train on FIGNet's Push-v1, check the policy on MuJoCo.
 
-    python examples/ppo_push.py                       # FIGNet, 200k steps (resumable: re-run it)
+    python examples/ppo_push.py                       # FIGNet, 102k steps (resumable: re-run it)
     python examples/ppo_push.py --dynamics mujoco     # the same budget on MuJoCo, for comparison
     fignet-gym ppo-table runs/ppo_push_fignet runs/ppo_push_mujoco    # the transfer table
 
@@ -26,11 +26,13 @@ from fignet_gym.agents.ppo_run import RunConfig, run_ppo, transfer_table
 class Args:
     env: str = "fignet_gym/Push-v1"
     dynamics: str = "fignet"  # training dynamics: "fignet" or "mujoco"; evaluation runs on both
-    steps: int = 200_000  # environment steps in total
+    steps: int = 102_400  # environment steps in total (50 PPO updates of 32 x 64 steps)
     num_envs: int = 32  # sub-environments stepped as one batched call
     n_steps: int = 64  # steps per sub-environment between PPO updates
+    net_arch: str = "256,256"  # hidden sizes of the policy and value MLPs
+    log_std_init: float = -1.0  # initial exploration noise: std e^-1 = 0.37 of the action range
     seed: int = 0
-    eval_every: int = 50_000
+    eval_every: int = 25_000
     final_episodes: int = 50  # episodes per dynamics of the final transfer table
     out: str = ""  # run folder (default: runs/ppo_push_<dynamics>)
 
@@ -53,6 +55,8 @@ def main(argv: Sequence[str] | None = None) -> None:
             num_envs=args.num_envs,
             n_steps=args.n_steps,
             batch_size=min(256, args.num_envs * args.n_steps),
+            net_arch=tuple(int(x) for x in args.net_arch.split(",")),
+            log_std_init=args.log_std_init,
             seed=args.seed,
         ),
         eval_every=args.eval_every,

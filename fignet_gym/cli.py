@@ -147,8 +147,8 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--lr", type=float, default=3e-4, help="Adam learning rate")
     o.add_argument("--gamma", type=float, default=0.99, help="discount")
     o.add_argument("--ent-coef", type=float, default=0.0, help="entropy bonus")
-    o.add_argument("--net-arch", default="64,64", help="hidden sizes of policy and value MLPs")
-    o.add_argument("--log-std-init", type=float, default=0.0,
+    o.add_argument("--net-arch", default="256,256", help="hidden sizes of policy and value MLPs")
+    o.add_argument("--log-std-init", type=float, default=-1.0,
                    help="initial log std of the Gaussian policy (exploration noise)")
     o.add_argument("--no-normalize", action="store_true",
                    help="no VecNormalize of observations and rewards")
