@@ -59,6 +59,8 @@ class CEMConfig:
         terminal_weight: the last predicted step's cost counted this many more times (as if the
             final state were held that long): a short horizon otherwise prefers not to start a
             push whose first steps turn the object.
+        replan_every: optimise every this many actions and play the plan's next actions in
+            between (1: classic receding horizon); divides the planning cost per action.
         seed: of the sampling generator (``reset`` restarts it).
     """
 
@@ -71,11 +73,17 @@ class CEMConfig:
     min_std: float = 0.05
     approach_weight: float = 100.0
     terminal_weight: float = 0.0
+    replan_every: int = 1
     seed: int = 0
 
     def __post_init__(self) -> None:
         _check_common(
-            self.horizon, self.population, self.iterations, self.noise_std, self.noise_correlation
+            self.horizon,
+            self.population,
+            self.iterations,
+            self.noise_std,
+            self.noise_correlation,
+            self.replan_every,
         )
         if not 1 <= self.elites <= self.population:
             raise ValueError(f"elites must be in [1, population], got {self.elites}")
@@ -97,6 +105,7 @@ class MPPIConfig:
         noise_correlation: correlation of the perturbations between consecutive steps (AR(1)).
         approach_weight: cost per metre between the final tip and the pushing point.
         terminal_weight: the last predicted step's cost counted this many more times.
+        replan_every: optimise every this many actions (see :class:`CEMConfig`).
         seed: of the sampling generator.
     """
 
@@ -108,19 +117,32 @@ class MPPIConfig:
     noise_correlation: float = 0.0
     approach_weight: float = 100.0
     terminal_weight: float = 0.0
+    replan_every: int = 1
     seed: int = 0
 
     def __post_init__(self) -> None:
         _check_common(
-            self.horizon, self.population, self.iterations, self.noise_std, self.noise_correlation
+            self.horizon,
+            self.population,
+            self.iterations,
+            self.noise_std,
+            self.noise_correlation,
+            self.replan_every,
         )
         if self.temperature <= 0:
             raise ValueError(f"temperature must be > 0, got {self.temperature}")
 
 
 def _check_common(
-    horizon: int, population: int, iterations: int, noise_std: float, rho: float = 0.0
+    horizon: int,
+    population: int,
+    iterations: int,
+    noise_std: float,
+    rho: float = 0.0,
+    replan_every: int = 1,
 ) -> None:
+    if not 1 <= replan_every <= horizon:
+        raise ValueError(f"replan_every must be in [1, horizon], got {replan_every}")
     if not 0.0 <= rho < 1.0:
         raise ValueError(f"noise_correlation must be in [0, 1), got {rho}")
     if horizon < 1 or population < 2 or iterations < 1:
@@ -204,6 +226,7 @@ class SamplingPlanner:
         self.plan_actions = np.zeros((self._horizon, self._action_dim))
         self.prediction = None
         self._fresh = True
+        self._played = 0  # actions of the current plan already returned
 
     def bind(self, env: gym.Env) -> None:
         """Plan for ``env`` (Push-v0/v1 or Toss-v0, wrappers allowed) from now on.
@@ -246,14 +269,24 @@ class SamplingPlanner:
             self.bind(env_or_state)
             assert self.problem is not None
             state = self.problem.env.get_state()
-        if not self._fresh:  # warm start: the previous plan, one step on, its last step repeated
-            self.plan_actions = np.concatenate([self.plan_actions[1:], self.plan_actions[-1:]])
-        self._fresh = False
-        cost, diverged, evaluated = self._optimise(state)
+        every = min(self.config.replan_every, self._horizon)
+        if self._fresh or self._played >= every:
+            if not self._fresh:  # warm start: the previous plan shifted, its last step repeated
+                n = self._played
+                self.plan_actions = np.concatenate(
+                    [self.plan_actions[n:], np.repeat(self.plan_actions[-1:], n, axis=0)]
+                )
+            self._fresh = False
+            self._played = 0
+            cost, diverged, evaluated = self._optimise(state)
+        else:  # play the plan on: no optimisation this step
+            cost, diverged, evaluated = self.last.cost if self.last else np.inf, 0, 0
+        action = self.plan_actions[self._played].astype(np.float32)
+        self._played += 1
         self.last = PlanInfo(
             cost, diverged, evaluated, time.perf_counter() - start, time.process_time() - cpu
         )
-        return self.plan_actions[0].astype(np.float32)
+        return action
 
     def predict(
         self,
