@@ -10,10 +10,14 @@ from fignet_gym.agents.planners import (
     CEMPlanner,
     MPPIConfig,
     MPPIPlanner,
+    PRESETS,
     PlanInfo,
     SamplingPlanner,
+    make_planner,
+    planner_config,
     run_episode,
 )
+from fignet_gym.agents.baselines import IdleAgent, RandomAgent
 from fignet_gym.agents.ppo import (
     EVAL_KEYS,
     PPOConfig,
@@ -34,6 +38,11 @@ from fignet_gym.agents.task import (
 
 __all__ = [
     "EVAL_KEYS",
+    "PRESETS",
+    "IdleAgent",
+    "RandomAgent",
+    "make_planner",
+    "planner_config",
     "PLAN_STATE_SPEC",
     "CEMConfig",
     "CEMPlanner",

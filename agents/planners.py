@@ -423,6 +423,38 @@ class MPPIPlanner(SamplingPlanner):
         return best_cost, diverged, cfg.iterations * cfg.population
 
 
+#: Planning budgets per scene (the benchmark's, ``docs/experiments.md`` "Issue 13"): Push plans 20
+#: steps (0.4 s) ahead with smooth, saturating candidates and re-plans every 2 actions (so the
+#: learned model costs <= 1 CPU-s per action on one core); Toss plans one release.
+PRESETS: dict[str, dict[str, Any]] = {
+    "push": {"horizon": 20, "population": 20, "iterations": 2, "noise_std": 1.0,
+             "noise_correlation": 0.8, "terminal_weight": 10.0, "replan_every": 2},
+    "toss": {"horizon": 1, "population": 16, "iterations": 3, "noise_std": 1.0,
+             "approach_weight": 0.0},
+}
+
+
+def planner_config(planner: str, scene_type: str, **overrides: Any) -> CEMConfig | MPPIConfig:
+    """The preset configuration of ``planner`` (``"cem"`` or ``"mppi"``) for ``scene_type``
+    (``"push"``, ``"toss"``), with ``overrides`` (``None`` values ignored)."""
+    if planner not in ("cem", "mppi"):
+        raise ValueError(f"unknown planner {planner!r}: use 'cem' or 'mppi'")
+    args = {**PRESETS.get(scene_type, {}), **{k: v for k, v in overrides.items() if v is not None}}
+    if planner == "cem":
+        args.setdefault("elites", max(2, args.get("population", 48) // 6))
+        return CEMConfig(**args)
+    return MPPIConfig(**args)
+
+
+def make_planner(
+    planner: str, dynamics: Dynamics, scene_type: str, env: gym.Env | None = None, **overrides: Any
+) -> SamplingPlanner:
+    """A :class:`CEMPlanner` or :class:`MPPIPlanner` with :func:`planner_config`'s settings."""
+    config = planner_config(planner, scene_type, **overrides)
+    cls = CEMPlanner if planner == "cem" else MPPIPlanner
+    return cls(dynamics, config, env=env)
+
+
 def run_episode(
     env: gym.Env,
     planner: SamplingPlanner,

@@ -1,4 +1,4 @@
-"""``fignet-gym`` command line: demo, bench, train, evaluate, floor, ship, and the data commands."""
+"""``fignet-gym`` command line: demo, plan, bench, train, evaluate, floor, ship, and the data commands."""
 
 from __future__ import annotations
 
@@ -47,6 +47,17 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _plan(args: argparse.Namespace) -> int:
+    from fignet_gym.tools.plan import PlanError, run
+
+    try:
+        run(args)
+    except PlanError as err:  # a user's error: one line, no traceback
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
 def _demo(args: argparse.Namespace) -> int:
     from fignet_gym.tools.demo import run_demo
 
@@ -58,6 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The full ``fignet-gym`` argument parser."""
     from fignet_gym.data.cli import register as register_data
     from fignet_gym.tools.bench import add_arguments as bench_args
+    from fignet_gym.tools.plan import add_arguments as plan_args
 
     p = argparse.ArgumentParser(prog="fignet-gym", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
@@ -66,6 +78,11 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--out", default="outputs/demo", help="folder for videos, plots and JSON")
     d.add_argument("--quick", action="store_true", help="fewer rollouts (for tests)")
     d.set_defaults(func=_demo)
+
+    pl = sub.add_parser("plan", help="MPC (CEM, MPPI) or a baseline on seeded episodes: "
+                        "success table, summary.json, side-by-side videos")
+    plan_args(pl)
+    pl.set_defaults(func=_plan)
 
     b = sub.add_parser("bench", help="learned step vs MuJoCo timings")
     bench_args(b)
