@@ -61,7 +61,7 @@ def _plan(args: argparse.Namespace) -> int:
 def _demo(args: argparse.Namespace) -> int:
     from fignet_gym.tools.demo import run_demo
 
-    run_demo(args.out, quick=args.quick)
+    run_demo(args.out, quick=args.quick, episodes=args.episodes, rollouts=args.rollouts)
     return 0
 
 
@@ -74,9 +74,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fignet-gym", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
 
-    d = sub.add_parser("demo", help="learned vs MuJoCo on the shipped pretrained simulators")
+    d = sub.add_parser("demo", help="MPC planning on the shipped learned simulator vs on MuJoCo, "
+                       "acting in MuJoCo (table, video, plot)")
     d.add_argument("--out", default="outputs/demo", help="folder for videos, plots and JSON")
-    d.add_argument("--quick", action="store_true", help="fewer rollouts (for tests)")
+    d.add_argument("--episodes", type=int, default=3, help="seeded Push-v1 episodes per model")
+    d.add_argument("--rollouts", action="store_true",
+                   help="also compare open-loop rollouts of the shipped simulators with MuJoCo")
+    d.add_argument("--quick", action="store_true", help="a tiny budget (for tests)")
     d.set_defaults(func=_demo)
 
     pl = sub.add_parser("plan", help="MPC (CEM, MPPI) or a baseline on seeded episodes: "
