@@ -428,7 +428,8 @@ class MPPIPlanner(SamplingPlanner):
 #: learned model costs <= 1 CPU-s per action on one core); Toss plans one release.
 PRESETS: dict[str, dict[str, Any]] = {
     "push": {"horizon": 20, "population": 20, "iterations": 2, "noise_std": 1.0,
-             "noise_correlation": 0.8, "terminal_weight": 10.0, "replan_every": 2},
+             "noise_correlation": 0.8, "terminal_weight": 10.0, "replan_every": 2,
+             "approach_weight": 30.0},
     "toss": {"horizon": 1, "population": 16, "iterations": 3, "noise_std": 1.0,
              "approach_weight": 0.0},
 }
