@@ -74,8 +74,8 @@ def scripted_action(env: gym.Env) -> np.ndarray:
     unit = to_goal / max(np.linalg.norm(to_goal), 1e-9)
     side = np.array([-unit[1], unit[0]])
     contact = u.task.pushing_point(s, u.goal)
-    along, lateral = np.dot(tip - contact, unit), np.dot(tip - contact, side)
-    if along > 0.002:  # on the goal's side of the object: go round it
+    lateral = np.dot(tip - contact, side)
+    if np.dot(tip - obj, unit) > 0:  # on the goal's side of the object: go round it
         target = contact - 0.02 * unit + 0.08 * (np.sign(lateral) or 1.0) * side
     elif abs(lateral) > 0.003:  # behind, but off the line through the object: line up
         target = contact - 0.004 * unit
