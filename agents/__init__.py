@@ -5,19 +5,19 @@ rollouts of any :class:`~fignet_gym.dynamics.Dynamics`; the PPO helpers (:mod:`~
 stable-baselines3 PPO on either dynamics and check a policy on another.
 """
 
+from fignet_gym.agents.baselines import IdleAgent, RandomAgent
 from fignet_gym.agents.planners import (
+    PRESETS,
     CEMConfig,
     CEMPlanner,
     MPPIConfig,
     MPPIPlanner,
-    PRESETS,
     PlanInfo,
     SamplingPlanner,
     make_planner,
     planner_config,
     run_episode,
 )
-from fignet_gym.agents.baselines import IdleAgent, RandomAgent
 from fignet_gym.agents.ppo import (
     EVAL_KEYS,
     PPOConfig,
