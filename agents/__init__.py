@@ -6,13 +6,17 @@ stable-baselines3 PPO on either dynamics and check a policy on another; :mod:`~f
 is ``fignet-gym ppo`` (resumable run folders, evaluation on both dynamics, the transfer table).
 """
 
+from fignet_gym.agents.baselines import IdleAgent, RandomAgent
 from fignet_gym.agents.planners import (
+    PRESETS,
     CEMConfig,
     CEMPlanner,
     MPPIConfig,
     MPPIPlanner,
     PlanInfo,
     SamplingPlanner,
+    make_planner,
+    planner_config,
     run_episode,
 )
 from fignet_gym.agents.ppo import (
@@ -42,6 +46,11 @@ from fignet_gym.agents.task import (
 
 __all__ = [
     "EVAL_KEYS",
+    "PRESETS",
+    "IdleAgent",
+    "RandomAgent",
+    "make_planner",
+    "planner_config",
     "PLAN_STATE_SPEC",
     "CEMConfig",
     "CEMPlanner",

@@ -59,6 +59,8 @@ class CEMConfig:
         terminal_weight: the last predicted step's cost counted this many more times (as if the
             final state were held that long): a short horizon otherwise prefers not to start a
             push whose first steps turn the object.
+        replan_every: optimise every this many actions and play the plan's next actions in
+            between (1: classic receding horizon); divides the planning cost per action.
         seed: of the sampling generator (``reset`` restarts it).
     """
 
@@ -71,11 +73,17 @@ class CEMConfig:
     min_std: float = 0.05
     approach_weight: float = 100.0
     terminal_weight: float = 0.0
+    replan_every: int = 1
     seed: int = 0
 
     def __post_init__(self) -> None:
         _check_common(
-            self.horizon, self.population, self.iterations, self.noise_std, self.noise_correlation
+            self.horizon,
+            self.population,
+            self.iterations,
+            self.noise_std,
+            self.noise_correlation,
+            self.replan_every,
         )
         if not 1 <= self.elites <= self.population:
             raise ValueError(f"elites must be in [1, population], got {self.elites}")
@@ -97,6 +105,7 @@ class MPPIConfig:
         noise_correlation: correlation of the perturbations between consecutive steps (AR(1)).
         approach_weight: cost per metre between the final tip and the pushing point.
         terminal_weight: the last predicted step's cost counted this many more times.
+        replan_every: optimise every this many actions (see :class:`CEMConfig`).
         seed: of the sampling generator.
     """
 
@@ -108,19 +117,32 @@ class MPPIConfig:
     noise_correlation: float = 0.0
     approach_weight: float = 100.0
     terminal_weight: float = 0.0
+    replan_every: int = 1
     seed: int = 0
 
     def __post_init__(self) -> None:
         _check_common(
-            self.horizon, self.population, self.iterations, self.noise_std, self.noise_correlation
+            self.horizon,
+            self.population,
+            self.iterations,
+            self.noise_std,
+            self.noise_correlation,
+            self.replan_every,
         )
         if self.temperature <= 0:
             raise ValueError(f"temperature must be > 0, got {self.temperature}")
 
 
 def _check_common(
-    horizon: int, population: int, iterations: int, noise_std: float, rho: float = 0.0
+    horizon: int,
+    population: int,
+    iterations: int,
+    noise_std: float,
+    rho: float = 0.0,
+    replan_every: int = 1,
 ) -> None:
+    if not 1 <= replan_every <= horizon:
+        raise ValueError(f"replan_every must be in [1, horizon], got {replan_every}")
     if not 0.0 <= rho < 1.0:
         raise ValueError(f"noise_correlation must be in [0, 1), got {rho}")
     if horizon < 1 or population < 2 or iterations < 1:
@@ -204,6 +226,7 @@ class SamplingPlanner:
         self.plan_actions = np.zeros((self._horizon, self._action_dim))
         self.prediction = None
         self._fresh = True
+        self._played = 0  # actions of the current plan already returned
 
     def bind(self, env: gym.Env) -> None:
         """Plan for ``env`` (Push-v0/v1 or Toss-v0, wrappers allowed) from now on.
@@ -246,14 +269,24 @@ class SamplingPlanner:
             self.bind(env_or_state)
             assert self.problem is not None
             state = self.problem.env.get_state()
-        if not self._fresh:  # warm start: the previous plan, one step on, its last step repeated
-            self.plan_actions = np.concatenate([self.plan_actions[1:], self.plan_actions[-1:]])
-        self._fresh = False
-        cost, diverged, evaluated = self._optimise(state)
+        every = min(self.config.replan_every, self._horizon)
+        if self._fresh or self._played >= every:
+            if not self._fresh:  # warm start: the previous plan shifted, its last step repeated
+                n = self._played
+                self.plan_actions = np.concatenate(
+                    [self.plan_actions[n:], np.repeat(self.plan_actions[-1:], n, axis=0)]
+                )
+            self._fresh = False
+            self._played = 0
+            cost, diverged, evaluated = self._optimise(state)
+        else:  # play the plan on: no optimisation this step
+            cost, diverged, evaluated = self.last.cost if self.last else np.inf, 0, 0
+        action = self.plan_actions[self._played].astype(np.float32)
+        self._played += 1
         self.last = PlanInfo(
             cost, diverged, evaluated, time.perf_counter() - start, time.process_time() - cpu
         )
-        return self.plan_actions[0].astype(np.float32)
+        return action
 
     def predict(
         self,
@@ -388,6 +421,39 @@ class MPPIPlanner(SamplingPlanner):
             mean = np.einsum("b,btk->tk", w / w.sum(), actions)
         self.plan_actions = np.clip(mean, -1.0, 1.0)
         return best_cost, diverged, cfg.iterations * cfg.population
+
+
+#: Planning budgets per scene (the benchmark's, ``docs/experiments.md`` "Issue 13"): Push plans 20
+#: steps (0.4 s) ahead with smooth, saturating candidates and re-plans every 2 actions (so the
+#: learned model costs <= 1 CPU-s per action on one core); Toss plans one release.
+PRESETS: dict[str, dict[str, Any]] = {
+    "push": {"horizon": 20, "population": 20, "iterations": 2, "noise_std": 1.0,
+             "noise_correlation": 0.8, "terminal_weight": 10.0, "replan_every": 2,
+             "approach_weight": 30.0},
+    "toss": {"horizon": 1, "population": 16, "iterations": 3, "noise_std": 1.0,
+             "approach_weight": 0.0},
+}
+
+
+def planner_config(planner: str, scene_type: str, **overrides: Any) -> CEMConfig | MPPIConfig:
+    """The preset configuration of ``planner`` (``"cem"`` or ``"mppi"``) for ``scene_type``
+    (``"push"``, ``"toss"``), with ``overrides`` (``None`` values ignored)."""
+    if planner not in ("cem", "mppi"):
+        raise ValueError(f"unknown planner {planner!r}: use 'cem' or 'mppi'")
+    args = {**PRESETS.get(scene_type, {}), **{k: v for k, v in overrides.items() if v is not None}}
+    if planner == "cem":
+        args.setdefault("elites", max(2, args.get("population", 48) // 6))
+        return CEMConfig(**args)
+    return MPPIConfig(**args)
+
+
+def make_planner(
+    planner: str, dynamics: Dynamics, scene_type: str, env: gym.Env | None = None, **overrides: Any
+) -> SamplingPlanner:
+    """A :class:`CEMPlanner` or :class:`MPPIPlanner` with :func:`planner_config`'s settings."""
+    config = planner_config(planner, scene_type, **overrides)
+    cls = CEMPlanner if planner == "cem" else MPPIPlanner
+    return cls(dynamics, config, env=env)
 
 
 def run_episode(

@@ -1,4 +1,4 @@
-"""``fignet-gym`` command line: demo, bench, train, evaluate, floor, ship, ppo, ppo-table, data commands."""
+"""``fignet-gym`` command line: demo, plan, ppo, ppo-table, bench, train, evaluate, floor, ship, data."""
 
 from __future__ import annotations
 
@@ -47,10 +47,21 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _plan(args: argparse.Namespace) -> int:
+    from fignet_gym.tools.plan import PlanError, run
+
+    try:
+        run(args)
+    except PlanError as err:  # a user's error: one line, no traceback
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
 def _demo(args: argparse.Namespace) -> int:
     from fignet_gym.tools.demo import run_demo
 
-    run_demo(args.out, quick=args.quick)
+    run_demo(args.out, quick=args.quick, episodes=args.episodes, rollouts=args.rollouts)
     return 0
 
 
@@ -70,14 +81,24 @@ def build_parser() -> argparse.ArgumentParser:
     """The full ``fignet-gym`` argument parser."""
     from fignet_gym.data.cli import register as register_data
     from fignet_gym.tools.bench import add_arguments as bench_args
+    from fignet_gym.tools.plan import add_arguments as plan_args
 
     p = argparse.ArgumentParser(prog="fignet-gym", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
 
-    d = sub.add_parser("demo", help="learned vs MuJoCo on the shipped pretrained simulators")
+    d = sub.add_parser("demo", help="MPC planning on the shipped learned simulator vs on MuJoCo, "
+                       "acting in MuJoCo (table, video, plot)")
     d.add_argument("--out", default="outputs/demo", help="folder for videos, plots and JSON")
-    d.add_argument("--quick", action="store_true", help="fewer rollouts (for tests)")
+    d.add_argument("--episodes", type=int, default=3, help="seeded Push-v1 episodes per model")
+    d.add_argument("--rollouts", action="store_true",
+                   help="also compare open-loop rollouts of the shipped simulators with MuJoCo")
+    d.add_argument("--quick", action="store_true", help="a tiny budget (for tests)")
     d.set_defaults(func=_demo)
+
+    pl = sub.add_parser("plan", help="MPC (CEM, MPPI) or a baseline on seeded episodes: "
+                        "success table, summary.json, side-by-side videos")
+    plan_args(pl)
+    pl.set_defaults(func=_plan)
 
     b = sub.add_parser("bench", help="learned step vs MuJoCo timings")
     bench_args(b)
