@@ -66,13 +66,13 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _ppo(args: argparse.Namespace) -> int:
-    from fignet_gym.agents.ppo_cli import run_ppo_command
+    from fignet_gym.tools.ppo import run_ppo_command
 
     return run_ppo_command(args)
 
 
 def _ppo_table(args: argparse.Namespace) -> int:
-    from fignet_gym.agents.ppo_cli import ppo_table_command
+    from fignet_gym.tools.ppo import ppo_table_command
 
     return ppo_table_command(args)
 

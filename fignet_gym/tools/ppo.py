@@ -1,4 +1,4 @@
-"""``fignet-gym ppo`` and ``fignet-gym ppo-table``: argument handling around :mod:`.ppo_run`."""
+"""``fignet-gym ppo`` and ``fignet-gym ppo-table``: arguments around :mod:`fignet_gym.agents.ppo_run`."""
 
 from __future__ import annotations
 
