@@ -260,3 +260,27 @@ def test_whole_state_spec_is_what_planners_take() -> None:
     copy.reset(seed=0)
     copy.set_state(u.get_state())
     np.testing.assert_array_equal(copy.get_state(), u.get_state())
+
+
+class CountingRollouts(MujocoDynamics):
+    """MuJoCo, counting rollout calls and the candidates in each."""
+
+    def __init__(self) -> None:
+        super().__init__(nthread=1)
+        self.batches: list[int] = []
+
+    def rollout(self, model: Any, initial_state: Any, control: Any = None, nstep: Any = None,
+                *, frame_skip: int = 1) -> np.ndarray:
+        out = super().rollout(model, initial_state, control, nstep, frame_skip=frame_skip)
+        self.batches.append(out.shape[0])
+        return out
+
+
+@pytest.mark.parametrize("env_id", ["fignet_gym/Push-v1", "fignet_gym/Toss-v0"])
+@pytest.mark.parametrize("planner_cls, config", [(CEMPlanner, TINY_CEM), (MPPIPlanner, TINY_MPPI)])
+def test_one_batched_rollout_per_iteration(env_id: str, planner_cls: type, config: Any) -> None:
+    env = gym.make(env_id, **(TOSS_FAST if "Toss" in env_id else {}))
+    env.reset(seed=0)
+    dyn = CountingRollouts()
+    planner_cls(dyn, config, env=env).plan(env)
+    assert dyn.batches == [config.population] * config.iterations
