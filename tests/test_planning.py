@@ -284,3 +284,31 @@ def test_one_batched_rollout_per_iteration(env_id: str, planner_cls: type, confi
     dyn = CountingRollouts()
     planner_cls(dyn, config, env=env).plan(env)
     assert dyn.batches == [config.population] * config.iterations
+
+
+# ----------------------------------------------------------------------------- the plan command
+def test_plan_command_writes_summary_rows_and_videos(tmp_path: Any, capsys: Any) -> None:
+    import json
+
+    from fignet_gym.cli import main
+
+    out = tmp_path / "plan"
+    argv = ["plan", "--env", "fignet_gym/Push-v1", "--planner", "cem", "--episodes", "2",
+            "--seed", "5", "--out", str(out), "--videos", "1", "--horizon", "2",
+            "--population", "4", "--iterations", "1", "--replan-every", "1"]
+    assert main(argv) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert [r["seed"] for r in summary["rows"]] == [5, 6]
+    for key in ("success_rate", "median_position_error", "median_orientation_error"):
+        assert key in summary
+    assert set(summary["seconds_per_action"]) == {"wall", "cpu"}
+    assert (out / "episode_5.mp4").stat().st_size > 0 and not (out / "episode_6.mp4").exists()
+    assert "success" in capsys.readouterr().out
+    # --resume skips finished episodes; a wrong id is one error line and exit code 2
+    assert main([*argv[:6], "3", *argv[7:], "--resume"]) == 0
+    rows = [json.loads(x) for x in (out / "episodes.jsonl").read_text().splitlines()]
+    assert [r["seed"] for r in rows] == [5, 6, 7]
+    capsys.readouterr()  # drop the progress bars
+    assert main(["plan", "--env", "fignet_gym/Nope-v0", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --env: unknown environment")
