@@ -260,3 +260,55 @@ def test_whole_state_spec_is_what_planners_take() -> None:
     copy.reset(seed=0)
     copy.set_state(u.get_state())
     np.testing.assert_array_equal(copy.get_state(), u.get_state())
+
+
+class CountingRollouts(MujocoDynamics):
+    """MuJoCo, counting rollout calls and the candidates in each."""
+
+    def __init__(self) -> None:
+        super().__init__(nthread=1)
+        self.batches: list[int] = []
+
+    def rollout(self, model: Any, initial_state: Any, control: Any = None, nstep: Any = None,
+                *, frame_skip: int = 1) -> np.ndarray:
+        out = super().rollout(model, initial_state, control, nstep, frame_skip=frame_skip)
+        self.batches.append(out.shape[0])
+        return out
+
+
+@pytest.mark.parametrize("env_id", ["fignet_gym/Push-v1", "fignet_gym/Toss-v0"])
+@pytest.mark.parametrize("planner_cls, config", [(CEMPlanner, TINY_CEM), (MPPIPlanner, TINY_MPPI)])
+def test_one_batched_rollout_per_iteration(env_id: str, planner_cls: type, config: Any) -> None:
+    env = gym.make(env_id, **(TOSS_FAST if "Toss" in env_id else {}))
+    env.reset(seed=0)
+    dyn = CountingRollouts()
+    planner_cls(dyn, config, env=env).plan(env)
+    assert dyn.batches == [config.population] * config.iterations
+
+
+# ----------------------------------------------------------------------------- the plan command
+def test_plan_command_writes_summary_rows_and_videos(tmp_path: Any, capsys: Any) -> None:
+    import json
+
+    from fignet_gym.cli import main
+
+    out = tmp_path / "plan"
+    argv = ["plan", "--env", "fignet_gym/Push-v1", "--planner", "cem", "--episodes", "2",
+            "--seed", "5", "--out", str(out), "--videos", "1", "--horizon", "2",
+            "--population", "4", "--iterations", "1", "--replan-every", "1"]
+    assert main(argv) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert [r["seed"] for r in summary["rows"]] == [5, 6]
+    for key in ("success_rate", "median_position_error", "median_orientation_error"):
+        assert key in summary
+    assert set(summary["seconds_per_action"]) == {"wall", "cpu"}
+    assert (out / "episode_5.mp4").stat().st_size > 0 and not (out / "episode_6.mp4").exists()
+    assert "success" in capsys.readouterr().out
+    # --resume skips finished episodes; a wrong id is one error line and exit code 2
+    assert main([*argv[:6], "3", *argv[7:], "--resume"]) == 0
+    rows = [json.loads(x) for x in (out / "episodes.jsonl").read_text().splitlines()]
+    assert [r["seed"] for r in rows] == [5, 6, 7]
+    capsys.readouterr()  # drop the progress bars
+    assert main(["plan", "--env", "fignet_gym/Nope-v0", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --env: unknown environment")
