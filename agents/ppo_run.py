@@ -592,6 +592,7 @@ def plot_curves(runs: Sequence[str | os.PathLike], path: str | os.PathLike) -> P
     One line per run and evaluation dynamics (solid: MuJoCo, dashed: FIGNet); saved as an image.
     """
     import matplotlib
+    import matplotlib.ticker
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -610,6 +611,7 @@ def plot_curves(runs: Sequence[str | os.PathLike], path: str | os.PathLike) -> P
     axes[0].set_ylabel("success rate")
     axes[1].set_ylabel("mean episode return (env reward)")
     for ax in axes:
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v / 1000:g}k"))
         ax.set_xlabel("training environment steps")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
