@@ -150,7 +150,10 @@ class CubeTossEnv(MjDynamicsEnv):
     real tosses; ``dynamics="mujoco"`` is MuJoCo with the parameters fitted to the same tosses
     (``mujoco_params``, see :func:`mujoco_parameters`; nominal ones, marked as such in
     ``info["mujoco_source"]``, if no fit is shipped). The learned model always gets the
-    nominal scene it was trained with.
+    nominal scene it was trained with (its friction and restitution inputs are the data's).
+    The two agree to a few cm on where the cube comes to rest (tosses of ~0.4 m: median 4.2 cm,
+    worst 9.1 cm over 32 seeded random actions; the errors of each against held-out real tosses
+    are in ``fignet_gym/pretrained/cube-real.md``).
 
     ## Action space
 

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 def _train(args: argparse.Namespace) -> int:
     from fignet_gym.data.format import TrajectoryFormatError
-    from fignet_gym.train.training import train_from_files
+    from fignet_gym.train.training import CheckpointError, train_from_files
 
     try:
         overrides = dict(json.loads(args.set)) if args.set else {}
@@ -19,9 +19,8 @@ def _train(args: argparse.Namespace) -> int:
     except json.JSONDecodeError as err:
         print(f"error: --set: not a JSON object ({err})", file=sys.stderr)
         return 1
-    except (ValueError, TrajectoryFormatError, FileNotFoundError) as err:
-        # A wrong --init name or path (CheckpointError is a ValueError), a malformed data file:
-        # one line, no traceback.
+    except (CheckpointError, TrajectoryFormatError, FileNotFoundError) as err:
+        # A wrong --init name or path, a malformed data file: one line, no traceback.
         print(f"error: {err}", file=sys.stderr)
         return 1
     return 0

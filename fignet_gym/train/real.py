@@ -24,8 +24,8 @@ from fignet_gym.data.format import Trajectory, build_scene, load_trajectories
 #: Optimiser steps of ``cube-real`` by training-set size (the last entry for anything larger):
 #: a few tosses are learned (and overfitted) sooner, so small sets get fewer steps. Selection on
 #: validation picks the best checkpoint within them (see docs/experiments.md, Issue 14).
-DEFAULT_STEPS: tuple[tuple[int, int], ...] = ((8, 2000), (16, 2500), (32, 3500), (64, 5000),
-                                              (128, 6000), (10**9, 7000))
+DEFAULT_STEPS: tuple[tuple[int, int], ...] = ((8, 1200), (16, 1500), (32, 2000), (64, 3000),
+                                              (128, 4000), (10**9, 5000))
 
 
 class TrainingInterrupted(RuntimeError):

@@ -34,7 +34,8 @@ from fignet_gym.data.format import Trajectory, build_scene, load_trajectories
 from fignet_gym.pretrained import load_checkpoint
 from fignet_gym.simulator.geometry import quat_mul
 from fignet_gym.simulator.graph import FACE_BASE, FACE_GROUPS
-from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
+# CheckpointError: re-exported for the CLI (which may import train, not simulator).
+from fignet_gym.simulator.model import CheckpointError, LearnedSimulator, SimulatorConfig  # noqa: F401
 from fignet_gym.simulator.scene import Scene
 
 # Training settings of retired experiments and the one value each still accepts (as
@@ -160,7 +161,7 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     "cube-real": {"simulator": dict(_CPU_SIZE, message_passing_steps=3, collision_radius=0.02,
                                     scene_type="cube-real", gravity=(0.0, 0.0, -9.61), feature_clip=0.2,
                                     rigid_output=True),
-                  "training": dict(steps=7000, batch_size=16, lr=1e-3, lr_final=3e-5,
+                  "training": dict(steps=5000, batch_size=16, lr=1e-3, lr_final=3e-5,
                                    valid_every=500, valid_trajectories=80, valid_last_weight=1.0)},
     # The paper's model size (latent 128, 10 message-passing steps, mesh-mesh edges), for comparison.
     "paper": {"simulator": dict(latent_size=128, message_passing_steps=10, mesh_edges=True),
