@@ -212,7 +212,7 @@ def test_data_dt_must_be_the_models(pushes: list, tmp_path) -> None:
     write_trajectories(data, pushes)
     zero_simulator("push", dt=0.01).save(ckpt)
     assert main(["evaluate", "--checkpoint", str(ckpt), "--data", str(data), "--out",
-                 str(tmp_path / "e"), "--videos", "0"]) == 1
+                 str(tmp_path / "e"), "--videos", "0"]) == 2
 
 
 def test_free_flight_metric_on_real_tracked_tosses(tmp_path) -> None:

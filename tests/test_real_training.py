@@ -117,7 +117,7 @@ def test_cli_init_with_an_unknown_name_is_one_error_line(tmp_path: Path) -> None
     cmd = [sys.executable, "-m", "fignet_gym", "train", "--data", str(data), "--config", "cube-real",
            "--out", str(tmp_path / "r"), "--init", "no-such-model", "--set", json.dumps(TINY)]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 1
+    assert done.returncode == 2
     lines = done.stderr.strip().splitlines()
     assert lines[-1].startswith("error: no-such-model") and "toss" in lines[-1]
     assert "Traceback" not in done.stderr

@@ -141,18 +141,18 @@ def test_sim2real_mujoco_stages_on_the_real_sample(tmp_path: Path, capsys) -> No
     dt = load_trajectories(data)[0].dt
     assert env["timestep"] == pytest.approx(dt / res["fit"]["params"]["substeps"])
     # a second run without --resume refuses to overwrite; with it, nothing is redone
-    assert main(argv) == 1
+    assert main(argv) == 2
     assert "--resume" in capsys.readouterr().err
     before = (out / "mujoco_fit.json").stat().st_mtime_ns
     assert main(argv + ["--resume"]) == 0
     assert (out / "mujoco_fit.json").stat().st_mtime_ns == before
     # too few trajectories for the split, and sizes beyond the training split, are errors
     assert main(["sim2real", "--data", str(data), "--out", str(tmp_path / "r2"), "--sizes", "3",
-                 "--fractions", "0.5", "0.25", "0.25"]) == 1
+                 "--fractions", "0.5", "0.25", "0.25"]) == 2
     err = capsys.readouterr().err
     assert "error: " in err and "cube.h5" in err and "size 3 exceeds" in err
     assert main(["sim2real", "--data", str(data), "--out", str(tmp_path / "r3"), "--no-fignet",
-                 "--fractions", "0.9", "0.05", "0.05"]) == 1
+                 "--fractions", "0.9", "0.05", "0.05"]) == 2
     assert "too few" in capsys.readouterr().err
 
 
