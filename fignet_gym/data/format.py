@@ -43,6 +43,17 @@ FORMAT_VERSION = 1
 #: Allowed deviation of a stored quaternion's norm from 1 (float32 storage keeps ~1e-7).
 QUAT_NORM_TOL = 1e-3
 INCOMPLETE_SUFFIX = ".incomplete"
+#: Largest accepted distance (m) of any object from the origin: beyond it a pose is a data
+#: error, not a scene (float32 keeps only ~1 mm at 1e4 m).
+MAX_POSITION = 1e4
+#: Largest accepted speed (m/s) of an object between two stored poses: faster means a teleport
+#: (a tracking glitch or a broken simulation); the data sets move at a few m/s.
+MAX_SPEED = 100.0
+#: Largest dataset (bytes) a trajectory field may declare: checked before reading, so a small
+#: corrupt file declaring gigabytes is refused instead of exhausting memory.
+MAX_FIELD_BYTES = 1 << 28
+#: Stored ``props`` may differ from their MJCF's by this much (relative, plus absolute; float32).
+PROPS_RTOL, PROPS_ATOL = 1e-4, 1e-5
 
 
 class TrajectoryFormatError(ValueError):
@@ -86,6 +97,7 @@ class Trajectory:
         metadata: free-form JSON-serialisable dict (source, seed, generator version, ...).
         extras: optional per-step arrays ``float[T, ...]`` (e.g. measured force).
         name: a label (file name of the source, or generator index).
+        source: the file it was read from (not stored; named in errors).
     """
 
     poses: np.ndarray
@@ -98,6 +110,7 @@ class Trajectory:
     metadata: dict[str, Any] = field(default_factory=dict)
     extras: dict[str, np.ndarray] = field(default_factory=dict)
     name: str = ""
+    source: str | None = field(default=None, compare=False)
 
     @property
     def num_steps(self) -> int:
@@ -121,18 +134,39 @@ class Trajectory:
 def build_scene(traj: Trajectory, mesh_options: MeshOptions | None = None) -> Scene:
     """Scene of a trajectory: from its MJCF if it has one, else from its meshes.
 
-    Checks that the rebuilt scene has the trajectory's objects (names and kinds, in order).
+    Checks that the rebuilt scene has the trajectory's objects (names and kinds, in order) and
+    properties (``props`` within :data:`PROPS_RTOL` of the MJCF's: the MJCF is what both
+    simulators use, so stored props that contradict it are an error, not silently ignored).
     """
     if traj.mjcf is not None:
         import mujoco
 
-        scene = Scene.from_mjmodel(mujoco.MjModel.from_xml_string(traj.mjcf), mesh_options)
+        where = _where(traj.source, traj.name, "mjcf")
+        try:
+            model = mujoco.MjModel.from_xml_string(traj.mjcf)
+        except ValueError as err:
+            raise TrajectoryFormatError(f"{where}: MuJoCo cannot compile it ({err})") from None
+        scene = Scene.from_mjmodel(model, mesh_options)
         if scene.object_names != tuple(traj.names) or scene.object_kind.tolist() != list(
                 np.asarray(traj.kinds).tolist()):
+            hint = ""
+            if len(traj.names) < scene.num_objects:
+                hint = (" (write every object of the MJCF, untracked static ones such as the floor "
+                        "included: fignet_gym.data.tracked.tracked_trajectory does)")
             raise TrajectoryFormatError(
-                f"{_where(None, traj.name, 'mjcf')}: its objects {scene.object_names} / kinds "
+                f"{where}: its objects {scene.object_names} / kinds "
                 f"{scene.object_kind.tolist()} differ from the stored names {tuple(traj.names)} / "
-                f"kinds {np.asarray(traj.kinds).tolist()}")
+                f"kinds {np.asarray(traj.kinds).tolist()}{hint}")
+        ref = scene.object_props.double().numpy()
+        props = np.asarray(traj.props, float)
+        bad = np.abs(props - ref) > PROPS_RTOL * np.abs(ref) + PROPS_ATOL
+        if bad.any():
+            o, j = (int(x) for x in np.argwhere(bad)[0])
+            label = ("mass", "friction", "restitution")[j]
+            raise TrajectoryFormatError(
+                f"{_where(traj.source, traj.name, 'props')}: object {traj.names[o]!r} has {label} "
+                f"{props[o, j]:.6g}, its MJCF gives {ref[o, j]:.6g} (props must be the MJCF's, "
+                "as Scene.from_mjmodel reads them)")
         return scene
     if traj.meshes is None:
         raise TrajectoryFormatError(f"{_where(None, traj.name)}: has neither 'mjcf' nor 'meshes'")
@@ -165,6 +199,19 @@ def validate_trajectory(traj: Trajectory, file: str | os.PathLike | None = None)
             f"{QUAT_NORM_TOL})")
     if not (np.isfinite(traj.dt) and traj.dt > 0):
         raise TrajectoryFormatError(f"{w('dt')}: must be a positive number, got {traj.dt}")
+    far = np.abs(poses[..., :3]).max(axis=-1)
+    if (far > MAX_POSITION).any():
+        t, o = np.unravel_index(int(np.argmax(far)), far.shape)
+        raise TrajectoryFormatError(
+            f"{w('poses')}: object {o} is {far[t, o]:.3g} m from the origin at step {t} "
+            f"(limit {MAX_POSITION:g} m)")
+    if poses.shape[0] > 1:
+        speed = np.linalg.norm(np.diff(poses[..., :3].astype(np.float64), axis=0), axis=-1) / traj.dt
+        if (speed > MAX_SPEED).any():
+            t, o = np.unravel_index(int(np.argmax(speed)), speed.shape)
+            raise TrajectoryFormatError(
+                f"{w('poses')}: object {o} jumps {speed[t, o] * traj.dt:.3g} m between steps {t} "
+                f"and {t + 1} ({speed[t, o]:.3g} m/s; limit {MAX_SPEED:g} m/s)")
     kinds = np.asarray(traj.kinds)
     if kinds.shape != (n_obj,) or not np.isin(kinds, [int(k) for k in ObjectKind]).all():
         raise TrajectoryFormatError(
@@ -225,6 +272,10 @@ class TrajectoryWriter:
         if self._file is None:
             raise RuntimeError(f"{self.path}: writer is closed")
         validate_trajectory(traj, self.path)
+        if traj.mjcf is not None:  # objects, kinds and props against the MJCF, naming this file
+            from dataclasses import replace
+
+            build_scene(replace(traj, source=str(self.path)))
         g = self._group.create_group(f"{self.count:06d}")
         g.attrs["name"] = traj.name or f"{self.count:06d}"
         g.attrs["dt"] = float(traj.dt)
@@ -292,11 +343,24 @@ def write_trajectories(path: str | os.PathLike, trajs: Iterable[Trajectory],
 # --------------------------------------------------------------------------- reading
 
 
-def _read_field(g: h5py.Group, key: str, where: str) -> np.ndarray:
+def _read_field(g: h5py.Group, key: str, where: str, ndim: int | None = None,
+                last: int | None = None) -> np.ndarray:
+    """A field's array, its declared shape and size checked before anything is read."""
     if key not in g:
         raise TrajectoryFormatError(f"{where}: missing field {key!r}")
     try:
-        return g[key][()]
+        dset = g[key]
+        shape, nbytes = dset.shape, dset.size * dset.dtype.itemsize
+    except (OSError, KeyError, ValueError, TypeError, AttributeError) as err:
+        raise TrajectoryFormatError(f"{where}: field {key!r} is unreadable ({err})") from None
+    if (ndim is not None and len(shape or ()) != ndim) or (last is not None and shape[-1] != last):
+        raise TrajectoryFormatError(f"{where}: field {key!r} has shape {shape}, expected "
+                                    f"{ndim} dimensions" + (f" ending in {last}" if last else ""))
+    if nbytes > MAX_FIELD_BYTES:
+        raise TrajectoryFormatError(f"{where}: field {key!r} declares {nbytes / 1e9:.3g} GB "
+                                    f"(shape {shape}; limit {MAX_FIELD_BYTES / 1e9:.3g} GB)")
+    try:
+        return dset[()]
     except (OSError, KeyError, ValueError, TypeError) as err:
         raise TrajectoryFormatError(f"{where}: field {key!r} is unreadable ({err})") from None
 
@@ -382,14 +446,14 @@ class TrajectoryFile:
             extras = {k: _read_field(g["extras"], k, where) for k in g["extras"]}
         names_raw = _read_field(g, "names", where)
         traj = Trajectory(
-            poses=_read_field(g, "poses", where),
+            poses=_read_field(g, "poses", where, ndim=3, last=7),
             dt=float(g.attrs["dt"]),
             kinds=_read_field(g, "kinds", where).astype(np.int64),
             props=_read_field(g, "props", where),
             names=tuple(n.decode() if isinstance(n, bytes) else str(n) for n in names_raw),
             mjcf=mjcf, meshes=meshes,
             metadata=_read_json_attr(g, "metadata", where),
-            extras=extras, name=name,
+            extras=extras, name=name, source=str(self.path),
         )
         validate_trajectory(traj, self.path)
         return traj
