@@ -15,8 +15,10 @@ import torch
 
 import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.dynamics import STATE_SPEC, FIGNetDynamics
+from fignet_gym.dynamics import learned as learned_dynamics
 from fignet_gym.mjcf import push_scene_xml
 from fignet_gym.pretrained import load_checkpoint
+from fignet_gym.simulator import networks
 from fignet_gym.simulator.scene import Scene
 
 
@@ -54,6 +56,40 @@ def test_scene_in_a_mixed_batch_equals_the_scene_alone(push_sim) -> None:  # noq
         out = push_sim.step(scene.repeat(len(order)), hist, hist[-1]).view(len(order), -1, 7)
         for k, i in enumerate(order):
             assert torch.equal(out[k], alone[i]), (order, k)
+
+
+def test_large_batches_and_chunks_equal_the_scene_alone(push_sim, monkeypatch) -> None:  # noqa: ANN001
+    """160 push scenes (4800 nodes) cross oneDNN's fused-linear threshold; stepped in chunks of
+    3 to 4 scenes (a tiny ``CHUNK_NODES``) they give the same bits as in one product."""
+    model = mujoco.MjModel.from_xml_string(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
+    scene = Scene.from_mjmodel(model, push_sim.config.mesh_options)
+    states = (_push_history(scene, 0.0), _push_history(scene, 0.5))
+    count = 160
+    assert count * scene.num_nodes >= networks.FUSED_MIN_ROWS
+    hist = torch.cat([states[i % 2] for i in range(count)], dim=1)
+    big = push_sim.step(scene.repeat(count), hist, hist[-1]).view(count, -1, 7)
+    for i in range(2):
+        alone = push_sim.step(scene, states[i], states[i][-1])
+        assert all(torch.equal(big[k], alone) for k in range(i, count, 2))
+    monkeypatch.setattr(learned_dynamics, "CHUNK_NODES", 100)
+    chunked = learned_dynamics.batched_step(push_sim, scene, count, hist, hist[-1])
+    assert torch.equal(chunked.view(count, -1, 7), big)
+
+
+@pytest.mark.skipif(not networks._ONEDNN, reason="no oneDNN in this torch build")
+def test_fused_linear_rounds_like_plain_linear() -> None:
+    """The assumption behind FUSED_MAX_IN: on this build oneDNN's fused linear (+ReLU) gives
+    exactly F.linear's bits for the layer widths it is used on, whatever the rows."""
+    gen = torch.Generator().manual_seed(0)
+    with torch.no_grad():
+        for k in (8, 16, 64, 128, networks.FUSED_MAX_IN):
+            for out in (64, 128, 192):
+                w, b = torch.randn(out, k, generator=gen), torch.randn(out, generator=gen)
+                x = torch.randn(networks.FUSED_MIN_ROWS + 37, k, generator=gen)
+                x[::3] = 0.0  # resting scenes have exact zeros in their features
+                plain = torch.nn.functional.linear(x, w, b)
+                assert torch.equal(networks.linear(x, w, b), plain), (k, out)
+                assert torch.equal(networks.linear(x, w, b, relu=True), plain.relu()), (k, out)
 
 
 def test_dynamics_step_many_and_rollout_equal_single_scenes(push_sim) -> None:  # noqa: ANN001

@@ -58,6 +58,32 @@ class _SceneInfo:
     floor_z: float  # lowest static node (m), -inf without static objects
 
 
+#: Nodes per learned step at most: larger batches are stepped in chunks of whole scenes. Per-scene
+#: cost is lowest around 8k to 17k nodes (docs/experiments.md, issue 17); beyond, every latent
+#: outgrows the caches and each new tensor is fresh memory to fault in.
+CHUNK_NODES = 16384
+
+
+def batched_step(sim: LearnedSimulator, scene: Scene, count: int, hist: Tensor, target: Tensor
+                 ) -> Tensor:
+    """One learned step of ``count`` copies of ``scene``, in chunks of at most
+    :data:`CHUNK_NODES` nodes (the scenes are disjoint, and a scene's result does not depend on
+    its batch, so chunking changes no bit).
+
+    ``hist float[H, count*O, 7]``, ``target float[count*O, 7]`` -> ``float[count*O, 7]``.
+    """
+    chunks = -(-count * scene.num_nodes // CHUNK_NODES)
+    if chunks <= 1:
+        return sim.step(scene.repeat(count), hist, target)
+    n_obj, out, start = scene.num_objects, [], 0
+    for i in range(chunks):
+        c = count // chunks + (i < count % chunks)  # sizes differ by at most one
+        rows = slice(start * n_obj, (start + c) * n_obj)
+        out.append(sim.step(scene.repeat(c), hist[:, rows], target[rows]))
+        start += c
+    return torch.cat(out)
+
+
 def _integrate_back(poses: Tensor, lin: Tensor, ang_body: Tensor, k: int, dt: float) -> Tensor:
     """Poses ``k * dt`` earlier at constant velocity.
 
@@ -249,9 +275,9 @@ class FIGNetDynamics(DynamicsBase):
         and the reasons of the scenes that diverged, which are frozen at their last good poses from
         on (so that nothing non-finite ever enters the graph). Scenes in ``dead`` stay frozen.
         """
-        scene = info.scene.repeat(B)
         n_obj = info.scene.num_objects
-        dyn = scene.dynamic_mask
+        dyn = info.scene.dynamic_mask.repeat(B)
+        static_poses = info.scene.static_poses.repeat(B, 1)
         bad: dict[int, str] = {}
         finite = (
             (torch.isfinite(hist).all(0).all(-1) & torch.isfinite(target).all(-1))
@@ -265,14 +291,14 @@ class FIGNetDynamics(DynamicsBase):
         if bool(frozen.any()):  # stand-in poses for frozen scenes: their reference configuration
             per_obj = frozen.repeat_interleave(n_obj)
             hist = torch.where(
-                per_obj[None, :, None] & ~torch.isfinite(hist), scene.static_poses[None], hist
+                per_obj[None, :, None] & ~torch.isfinite(hist), static_poses[None], hist
             )
             target = torch.where(
-                per_obj[:, None] & ~torch.isfinite(target), scene.static_poses, target
+                per_obj[:, None] & ~torch.isfinite(target), static_poses, target
             )
         for k in range(nlearn):
             try:
-                nxt = self.simulator.step(scene, hist, target)
+                nxt = batched_step(self.simulator, info.scene, B, hist, target)
             except (ShapeMatchError, torch.linalg.LinAlgError) as err:
                 reason = f"learned step failed at t={t0[0] + (k + 1) * self.dt:.3f}s: {err}"
                 return hist, {b: bad.get(b, reason) for b in range(B) if b not in dead}
