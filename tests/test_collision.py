@@ -331,3 +331,23 @@ def test_empty_and_far_inputs():
         assert got.num_contacts == 0
         assert got.sender_point.shape == (0, 3) and got.sender_point.dtype == torch.float32
         assert got.sender_face.dtype == torch.long and got.distance.shape == (0,)
+
+
+def test_node_collision_edges_match_brute_force() -> None:
+    from fignet_gym.simulator.collision import node_collision_edges
+
+    gen = torch.Generator().manual_seed(3)
+    counts = [5, 7, 4, 6]
+    node_object = torch.repeat_interleave(torch.arange(4), torch.tensor(counts))
+    pos = torch.rand(sum(counts), 3, generator=gen, dtype=torch.float64)
+    pairs = torch.tensor([[0, 1], [0, 3], [2, 3]])  # objects 1 and 2 may not collide
+    radius = 0.35
+    s, r = node_collision_edges(pos, node_object, pairs, radius)
+    got = sorted(zip(s.tolist(), r.tolist(), strict=True))
+    allowed = {tuple(p) for p in pairs.tolist()}
+    expect = sorted((a, b) for a in range(len(pos)) for b in range(len(pos))
+                    if tuple(sorted((int(node_object[a]), int(node_object[b])))) in allowed
+                    and float((pos[a] - pos[b]).norm()) < radius)
+    assert got == expect and len(expect) > 4
+    empty = node_collision_edges(pos, node_object, pairs[:0], radius)
+    assert empty[0].numel() == 0 and empty[1].numel() == 0

@@ -8,7 +8,6 @@ import torch
 from fignet_gym.simulator.geometry import (
     ShapeMatchError,
     axis_angle_to_quat,
-    barycentric,
     kabsch,
     matrix_to_quat,
     quat_angle,
@@ -111,20 +110,3 @@ def test_rigid_projection_keeps_rigid_fields_and_removes_only_what_is_orthogonal
         assert torch.allclose(torch.cross(pos[m], rest[m], dim=-1).sum(0),
                               torch.zeros(3, dtype=torch.float64), atol=1e-8)
     assert torch.allclose(rigid_projection(proj, pos, seg, 3), proj, atol=1e-7)
-
-
-def test_barycentric_hand_cases() -> None:
-    tri = torch.tensor([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]] * 3, dtype=torch.float64)
-    # In the plane, at a vertex, and 0.3 above the plane (projected onto it).
-    pts = torch.tensor([[0.25, 0.5, 0.0], [1.0, 0.0, 0.0], [0.25, 0.5, 0.3]], dtype=torch.float64)
-    w = barycentric(tri, pts)
-    expected = torch.tensor([[0.25, 0.25, 0.5], [0.0, 1.0, 0.0], [0.25, 0.25, 0.5]], dtype=torch.float64)
-    assert torch.allclose(w, expected)
-    # Weights reproduce any affine map of the vertices at the point (here a rotation plus shift).
-    R = quat_to_matrix(axis_angle_to_quat(torch.tensor([0.3, -0.2, 0.5], dtype=torch.float64)))
-    moved = tri[:1] @ R.T + 0.7
-    assert torch.allclose((w[:1, :, None] * moved).sum(1), pts[:1] @ R.T + 0.7)
-    # A degenerate (collinear) triangle puts all weight on its first vertex instead of dividing by 0.
-    line = torch.tensor([[[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]], dtype=torch.float64)
-    mid = torch.tensor([[0.5, 0.0, 0.0]], dtype=torch.float64)
-    assert barycentric(line, mid).tolist() == [[1.0, 0.0, 0.0]]

@@ -10,7 +10,7 @@ import torch
 
 from fignet_gym.simulator.collision import FaceContacts
 from fignet_gym.simulator.geometry import rigid_projection
-from fignet_gym.simulator.graph import face_edge_features
+from fignet_gym.simulator.graph import FACE_GROUPS, face_edge_features
 from fignet_gym.simulator.model import CheckpointError, LearnedSimulator, SimulatorConfig
 from fignet_gym.simulator.scene import Scene
 
@@ -51,7 +51,7 @@ def test_hand_computed_face_features() -> None:
     faces = torch.tensor([[0, 1, 2], [3, 4, 5]])
     ps, pr = torch.tensor([[0.2, 0.3, 0.0]], dtype=torch.float64), pos[3:4]
     c = FaceContacts(torch.tensor([0]), torch.tensor([1]), ps, pr, torch.tensor([0.1]))
-    s_nodes, r_nodes, f = face_edge_features(pos, faces, c)
+    s_nodes, r_nodes, f = face_edge_features(pos, faces, c, torch.zeros_like(pos))
     # Nodes sorted by distance to each face's closest point: A: 0 (0.36), 2 (0.73), 1 (0.85).
     assert s_nodes.tolist() == [[0, 2, 1]] and r_nodes.tolist() == [[3, 5, 4]]
     n_r = torch.tensor([-0.72, -0.64, 0.64], dtype=torch.float64) / math.sqrt(1.3376)
@@ -71,7 +71,7 @@ def test_hand_computed_face_features() -> None:
     kin_disp = torch.zeros_like(pos)
     kin_disp[:3, 2] = 0.04
     kin_disp[3:, 0] = 0.5
-    _, _, f_next = face_edge_features(pos, faces, c, kin_disp=kin_disp)
+    _, _, f_next = face_edge_features(pos, faces, c, kin_disp, face_groups=FACE_GROUPS)
     assert torch.allclose(f_next[0, :34], f[0]) and f_next.shape[1] == 38
     assert torch.allclose(f_next[0, 34:], torch.tensor([0, 0, 0.06, 0.06], dtype=torch.float64))
 
@@ -201,12 +201,12 @@ def test_overfits_one_short_mujoco_trajectory(push_like_xml: str) -> None:
     k = windows.shape[0]
     batch = scene.repeat(k)
     poses = windows.permute(1, 0, 2, 3).reshape(4, k * scene.num_objects, 7)
-    graph, target, weight = sim.training_example(batch, poses)
+    example = sim.training_example(batch, poses)
     opt = torch.optim.Adam(sim.parameters(), lr=3e-3)
     losses = []
     for _ in range(250):
         opt.zero_grad()
-        loss, _ = sim.loss(graph, target, weight, accumulate=len(losses) < 5)
+        loss = sim.loss(example, accumulate=len(losses) < 5)
         loss.backward()
         opt.step()
         losses.append(loss.item())
@@ -248,53 +248,24 @@ def test_last_block_has_no_dead_weights_and_old_checkpoints_load(tmp_path, push_
         LearnedSimulator.load(old)
 
 
-@pytest.mark.parametrize("before, after", [
-    ({}, {"next_separation": True}),
-    ({"next_separation": True}, {"next_separation": True, "contact_lever": True}),
-    ({}, {"contact_lever": True}),
-    ({"contact_lever": True}, {"contact_lever": True, "ballistic_separation": True}),
-])
-def test_warm_start_onto_new_face_features_keeps_the_function(push_like_xml: str, before: dict,
-                                                              after: dict) -> None:
+def test_warm_start_onto_new_face_features_keeps_the_function(push_like_xml: str) -> None:
     from fignet_gym.train.training import warm_start
 
-    source = LearnedSimulator(replace(SMALL, **before)).eval()
+    source = LearnedSimulator(SMALL).eval()
     randomize_normalizers(source, push_like_xml)
-    wide = LearnedSimulator(replace(SMALL, **after)).eval()
+    wide = LearnedSimulator(replace(SMALL, **{grp.name: True for grp in FACE_GROUPS})).eval()
     warm_start(wide, source)
     scene, hist = scene_and_history(push_like_xml)
     nxt = hist[-1].clone()
     nxt[2, 0] -= 0.01  # the tip moves on: the new features are non-zero
     g = wide.build_inputs(scene, hist, nxt).graph
-    assert g.face_edges.features.shape[1] == 34 + 4 * len(after)
+    assert g.face_edges.features.shape[1] == 34 + sum(grp.size for grp in FACE_GROUPS)
     assert g.face_edges.features[:, 34:].abs().sum() > 0
     assert torch.allclose(wide.step(scene, hist, nxt), source.step(scene, hist, nxt), atol=1e-6)
     with pytest.raises(ValueError, match="cannot warm-start"):
         warm_start(LearnedSimulator(replace(SMALL, latent_size=8)), source)
     with pytest.raises(ValueError, match="cannot warm-start"):  # features cannot be dropped
         warm_start(source, wide)
-
-
-def test_contact_lever_is_the_receiver_point_from_its_objects_centre_of_mass(push_like_xml: str) -> None:
-    sim = LearnedSimulator(replace(SMALL, contact_lever=True, feature_clip=0.0)).eval()
-    scene, hist = scene_and_history(push_like_xml)
-    inputs = sim.build_inputs(scene, hist, hist[-1])
-    f, contacts = inputs.graph.face_edges.features, inputs.contacts
-    assert f.shape[0] > 0
-    obj = scene.node_object[scene.faces[contacts.receiver_face, 0]]
-    com = scene.com_positions(hist[-1])[obj]
-    lever = contacts.receiver_point - com
-    assert torch.allclose(f[:, -4:-1], lever, atol=1e-6)
-    assert torch.allclose(f[:, -1], lever.norm(dim=-1), atol=1e-6)
-    # The closest point lies on the receiver's mesh: no farther from its centre than its nodes.
-    reach = (scene.node_positions(hist[-1]) - scene.com_positions(hist[-1])[scene.node_object]).norm(dim=-1)
-    radius = torch.zeros(scene.num_objects).scatter_reduce(0, scene.node_object, reach, "amax")
-    assert (lever.norm(dim=-1) <= radius[obj] + 1e-6).all()
-    # Moving the whole scene leaves every lever as it was.
-    shifted = hist.clone()
-    shifted[..., :3] += torch.tensor([0.3, -0.2, 0.1])
-    f2 = sim.build_inputs(scene, shifted, shifted[-1]).graph.face_edges.features
-    assert torch.allclose(f2[:, -4:], f[:, -4:], atol=1e-5)
 
 
 def test_rigid_training_noise_has_the_configured_scales(push_like_xml: str) -> None:
@@ -336,81 +307,58 @@ def test_rigid_output_predicts_rigid_motion_in_steps_and_in_the_loss(push_like_x
         assert is_rigid(sim.predict_acceleration(graph))
         assert not is_rigid(plain.predict_acceleration(graph))  # so the check above can fail
         # Training sees the same projected prediction as stepping.
-        graph_t, target, weight = sim.training_example(scene, torch.cat((hist, hist[-1:])))
-        _, pred_n = sim.loss(graph_t, target, weight, accumulate=False)
-        assert is_rigid(sim.target_norm.inverse(pred_n))
+        example = sim.training_example(scene, torch.cat((hist, hist[-1:])))
+        assert is_rigid(sim.target_norm.inverse(sim.training_prediction(example.graph)))
 
 
-def test_free_flight_objects_without_collision_edges_fall_exactly() -> None:
-    from fignet_gym.data.format import build_scene
-    from fignet_gym.data.generate import iter_trajectories
+def test_retired_config_keys_load_at_their_old_default_and_refuse_anything_else(tmp_path,
+                                                                              push_like_xml: str) -> None:
+    from fignet_gym.simulator.model import RETIRED_KEYS
 
-    cfg = replace(SMALL, collision_radius=0.1, gravity=(0.0, 0.0, -10.0), feature_clip=3.0, free_flight=True)
-    sim = LearnedSimulator(cfg).eval()
-    sim.target_norm.accumulate(torch.randn(1000, 3, dtype=torch.float64) * 1e-3)  # a non-zero network
-    plain = LearnedSimulator(replace(cfg, free_flight=False)).eval()
-    plain.load_state_dict(sim.state_dict())
-    traj = list(iter_trajectories("toss-simple", 1, seed=0))[0]
-    scene = build_scene(traj, cfg.mesh_options)
-    poses = torch.as_tensor(traj.poses[:4], dtype=torch.float32)  # objects in the air, some close
-    graph = sim.build_inputs(scene, poses[:3], poses[3]).graph
-    hit = sim.objects_in_contact(graph)
-    # The collision edges decide which objects are in contact: a receiver node of any edge.
-    recv_obj = scene.node_object[graph.face_edges.receivers.reshape(-1)].unique()
-    assert torch.equal(hit.nonzero().squeeze(1), recv_obj)
-    dyn = scene.dynamic_mask
-    free, touched = dyn & ~hit, dyn & hit
-    assert free.any() and touched.any()
-    on_free, on_touched = free[scene.node_object], touched[scene.node_object]
-    with torch.no_grad():
-        acc, acc_plain = sim.predict_acceleration(graph), plain.predict_acceleration(graph)
-        # Exactly the gravity prior on free objects; the network's output elsewhere.
-        assert torch.equal(acc[on_free], sim.gravity_step().expand(int(on_free.sum()), 3))
-        assert torch.equal(acc[on_touched], acc_plain[on_touched])
-        assert not torch.allclose(acc_plain[on_free], sim.gravity_step().expand(int(on_free.sum()), 3))
-        # Free objects carry no weight in the loss: moving their targets leaves it unchanged.
-        graph_t, target, weight = sim.training_example(scene, poses)
-        base, _ = sim.loss(graph_t, target, weight, accumulate=False)
-        target[on_free] += 1.0
-        assert sim.loss(graph_t, target, weight, accumulate=False)[0] == pytest.approx(float(base))
-        target[on_touched] += 1.0
-        assert sim.loss(graph_t, target, weight, accumulate=False)[0] != pytest.approx(float(base))
-
-
-def test_ballistic_separation_hand_case() -> None:
-    # The hand-computed pair above; the receiver face falls by 0.05 at the touching vertex and
-    # the sender's vertex 0 moves by 0.01 in x. Barycentric weights of the sender point (0.2, 0.3)
-    # are (0.5, 0.2, 0.3); the receiver point is its vertex 3.
-    pos = torch.tensor([[0.0, 0, 0], [1, 0, 0], [0, 1, 0],
-                        [0.2, 0.3, 0.1], [1, 0.3, 1.0], [0.2, 1.1, 0.9]], dtype=torch.float64)
-    step = torch.tensor([[0.01, 0, 0], [0, 0, 0], [0, 0, 0],
-                         [0, 0, -0.05], [0.1, 0, -0.05], [0, 0.2, -0.05]], dtype=torch.float64)
-    faces = torch.tensor([[0, 1, 2], [3, 4, 5]])
-    ps = torch.tensor([[0.2, 0.3, 0.0]], dtype=torch.float64)
-    c = FaceContacts(torch.tensor([0]), torch.tensor([1]), ps, pos[3:4], torch.tensor([0.1]))
-    _, _, f = face_edge_features(pos, faces, c, node_step=step)
-    assert f.shape == (1, 38)
-    d = torch.tensor([-0.005, 0.0, 0.05], dtype=torch.float64)
-    assert torch.allclose(f[0, 34:], torch.cat((d, d.norm()[None])))
-
-
-def test_ballistic_separation_moves_dynamic_nodes_by_velocity_and_gravity(push_like_xml: str) -> None:
-    g = (0.0, 0.0, -10.0)
-    sim = LearnedSimulator(replace(SMALL, ballistic_separation=True, gravity=g)).eval()
+    sim = LearnedSimulator(SMALL).eval()
+    randomize_normalizers(sim, push_like_xml)
+    path = tmp_path / "old.pt"
+    sim.save(path)
+    blob = torch.load(path, weights_only=True)
+    # A checkpoint written while the experiments existed carried them all, switched off.
+    blob["config"].update(RETIRED_KEYS)
+    torch.save(blob, path)
+    loaded = LearnedSimulator.load(path)
+    assert loaded.config == sim.config
     scene, hist = scene_and_history(push_like_xml)
-    nxt = hist[-1].clone()
-    nxt[2, 0] -= 0.01  # the tip's known next displacement
-    inputs = sim.build_inputs(scene, hist, nxt)
-    f, con = inputs.graph.face_edges.features, inputs.contacts
-    assert f.shape[1] == 38 and f.shape[0] > 0
-    # The box (object 1) only translates in the history: every node steps by its velocity plus
-    # g dt^2; the tip (2) by its known displacement; the floor (0) stays.
-    steps = torch.zeros(3, 3)
-    steps[1] = hist[-1, 1, :3] - hist[-2, 1, :3] + torch.tensor(g) * sim.config.dt ** 2
-    steps[2] = nxt[2, :3] - hist[-1, 2, :3]
-    s_obj = scene.face_object[con.sender_face]
-    r_obj = scene.face_object[con.receiver_face]
-    assert set(s_obj.tolist()) == {0, 2} and set(r_obj.tolist()) == {1}
-    d = con.receiver_point - con.sender_point + steps[r_obj] - steps[s_obj]
-    assert torch.allclose(f[:, -4:-1], d, atol=1e-6)
-    assert torch.allclose(f[:, -1], d.norm(dim=-1), atol=1e-6)
+    assert torch.equal(loaded.step(scene, hist, hist[-1]), sim.step(scene, hist, hist[-1]))
+    for key, accepted in RETIRED_KEYS.items():
+        on = tmp_path / f"{key}.pt"
+        torch.save({**blob, "config": {**blob["config"], key: not accepted}}, on)
+        with pytest.raises(CheckpointError, match=f"{key}.pt: config key '{key}' is a retired"):
+            LearnedSimulator.load(on)
+
+
+def test_face_groups_are_config_flags_and_set_the_feature_width(push_like_xml: str) -> None:
+    from dataclasses import fields
+
+    from fignet_gym.simulator.graph import FACE_BASE, feature_sizes
+
+    flags = {f.name: f.type for f in fields(SimulatorConfig)}
+    scene, hist = scene_and_history(push_like_xml)
+    for grp in FACE_GROUPS:
+        assert flags[grp.name] in (bool, "bool")
+        cfg = replace(SMALL, **{grp.name: True})
+        assert cfg.face_groups == (grp,) and SMALL.face_groups == ()
+        width = LearnedSimulator(cfg).build_inputs(scene, hist, hist[-1]).graph.face_edges.features.shape[1]
+        assert width == FACE_BASE + grp.size == feature_sizes(2, face_groups=(grp,))["face"]
+
+
+def test_node_collision_baseline_uses_node_edges_only(push_like_xml: str) -> None:
+    sim = LearnedSimulator(replace(SMALL, collision="node", collision_radius=0.04)).eval()
+    randomize_normalizers(sim, push_like_xml)
+    scene, hist = scene_and_history(push_like_xml)
+    g = sim.build_inputs(scene, hist, hist[-1]).graph
+    s, r = g.node_edges.senders, g.node_edges.receivers
+    assert g.face_edges.features.shape == (0, 34) and s.numel() > 0
+    assert (scene.node_object[s] != scene.node_object[r]).all()
+    d = g.node_pos[s] - g.node_pos[r]
+    assert (d.norm(dim=-1) < 0.04).all()
+    assert torch.allclose(g.node_edges.features, torch.cat((d, d.norm(dim=-1, keepdim=True)), -1))
+    out = sim.step(scene, hist, hist[-1])
+    assert torch.isfinite(out).all() and not torch.allclose(out[1], hist[-1, 1], atol=1e-6)

@@ -82,6 +82,15 @@ def test_unknown_training_keys_are_rejected() -> None:
     assert np.isfinite(TrainConfig().lr)
 
 
+def test_retired_training_keys_load_at_their_old_default_only() -> None:
+    from fignet_gym.train.training import RETIRED_TRAINING_KEYS
+
+    for key, accepted in RETIRED_TRAINING_KEYS.items():
+        assert TrainConfig.from_dict({key: accepted, "steps": 7}) == TrainConfig(steps=7)
+        with pytest.raises(ValueError, match=f"'{key}' is a retired"):
+            TrainConfig.from_dict({key: accepted + 3.0})
+
+
 def test_pushforward_feeds_the_models_own_rollout(push_file: Path, tmp_path: Path) -> None:
     trajs = load_trajectories(push_file)
     sim_cfg, cfg = load_run_config("push-cpu", {**TINY, "training.unroll_steps": 3,
@@ -150,14 +159,6 @@ def test_sampler_weights_still_windows_near_motion_above_other_still_windows(pus
             assert wt == pytest.approx(50.0), t  # approach or just stopped
         else:
             assert wt == pytest.approx(1.0), t
-    # Start weight: only the window supervised on the push's first moving step (pose first ->
-    # first + 1, the window's last step) changes, by the factor.
-    boosted = WindowSampler([traj], [scene], history=2, still_weight=0.1, seed=0, near=3,
-                            near_weight=5.0, start_weight=4.0)
-    ratio = (boosted.prob / boosted.prob[0]) / w
-    onset = first - (span - 2)
-    assert ratio[onset] == pytest.approx(4.0)
-    assert np.allclose(np.delete(ratio, onset), 1.0)
 
 
 def test_several_data_files_are_pooled_in_order(push_file: Path, tmp_path: Path,

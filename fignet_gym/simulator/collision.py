@@ -1,4 +1,5 @@
-"""Face-face collision detection: directed face pairs of different objects within ``d_c``.
+"""Collision edges: directed face pairs of different objects within ``d_c`` (FIGNet), and node
+pairs (the MeshGraphNets baseline, :func:`node_collision_edges`).
 
 FIGNet (Sec. 3.1, App. C) connects two faces of different objects by a face-face edge when any
 point of one is within the collision radius ``d_c`` of any point of the other, and builds the edge
@@ -198,7 +199,8 @@ def _closest_points(tri_a: Tensor, tri_b: Tensor) -> tuple[Tensor, Tensor, Tenso
     return _dot(diff, diff).sqrt(), point_a, point_b
 
 
-def _empty_contacts(like: Tensor) -> FaceContacts:
+def no_face_contacts(like: Tensor) -> FaceContacts:
+    """Zero contacts, with the device and float dtype of ``like``."""
     idx = torch.zeros(0, dtype=torch.long, device=like.device)
     pts = like.new_zeros(0, 3)
     return FaceContacts(idx, idx.clone(), pts, pts.clone(), like.new_zeros(0))
@@ -239,7 +241,7 @@ def find_face_contacts(
         (the first ``C / 2`` contacts have their sender on the side of ``object_pairs[:, 0]``).
     """
     if object_pairs.shape[0] == 0 or faces.shape[0] == 0:
-        return _empty_contacts(node_pos)
+        return no_face_contacts(node_pos)
     # Coordinates first (triangles [9, F], boxes [6, F]): gathers and reductions then run over
     # contiguous memory; 2-D index_select and amin beat fancy indexing, 3-D gathers and all()
     # several times on CPU.
@@ -256,7 +258,7 @@ def find_face_contacts(
     pairs = object_pairs.index_select(0, near.nonzero().squeeze(1))  # [K', 2]
     n_pairs = pairs.shape[0]
     if n_pairs == 0:
-        return _empty_contacts(node_pos)
+        return no_face_contacts(node_pos)
 
     # Faces of each object near its partner's box. Entry e < K' stands for the first object of
     # pair e against the second's box, entry K' + e for the reverse.
@@ -294,3 +296,45 @@ def find_face_contacts(
         receiver_point=torch.cat((pb, pa), 1).T.contiguous(),
         distance=torch.cat((dist, dist)),
     )
+
+
+@torch.no_grad()
+def node_collision_edges(node_pos: Tensor, node_object: Tensor, object_pairs: Tensor, radius: float
+                         ) -> tuple[Tensor, Tensor]:
+    """MeshGraphNets "world edges": node pairs of candidate object pairs closer than ``radius``.
+
+    The collision edges of the node-based baseline (``SimulatorConfig.collision = "node"``).
+    Vectorised over all node pairs of every candidate object pair (fine for the baselines' scene
+    sizes; no broad phase).
+
+    Args:
+        node_pos: ``float[N, 3]`` world node positions.
+        node_object: ``int64[N]`` object of each node; nodes are contiguous per object.
+        object_pairs: ``int64[K, 2]`` object pairs that may collide (as in :func:`find_face_contacts`).
+        radius: pairs with distance ``< radius`` are kept.
+
+    Returns:
+        ``(senders int64[W], receivers int64[W])``, each close pair in both directions.
+    """
+    pairs = object_pairs
+    if pairs.shape[0] == 0:
+        return no_node_edges(node_pos)
+    n_obj = max(int(node_object.max()), int(pairs.max())) + 1
+    counts = torch.bincount(node_object, minlength=n_obj)
+    starts = torch.cumsum(counts, 0) - counts
+    ca, cb = counts[pairs[:, 0]], counts[pairs[:, 1]]
+    per_pair = ca * cb
+    pair_id = torch.repeat_interleave(torch.arange(pairs.shape[0], device=node_pos.device), per_pair)
+    offset = torch.arange(int(per_pair.sum()), device=node_pos.device) - torch.repeat_interleave(
+        torch.cumsum(per_pair, 0) - per_pair, per_pair)
+    a = starts[pairs[pair_id, 0]] + offset // cb[pair_id]
+    b = starts[pairs[pair_id, 1]] + offset % cb[pair_id]
+    close = ((node_pos[a] - node_pos[b]) ** 2).sum(-1) < radius**2
+    a, b = a[close], b[close]
+    return torch.cat((a, b)), torch.cat((b, a))
+
+
+def no_node_edges(like: Tensor) -> tuple[Tensor, Tensor]:
+    """Zero node-node edges ``(int64[0], int64[0])`` on the device of ``like``."""
+    empty = torch.zeros(0, dtype=torch.long, device=like.device)
+    return empty, empty.clone()

@@ -120,23 +120,6 @@ def quat_to_axis_angle(q: Tensor) -> Tensor:
     return q[..., 1:] * scale
 
 
-def barycentric(tri: Tensor, point: Tensor) -> Tensor:
-    """Barycentric weights ``float[K, 3]`` of points ``float[K, 3]`` in triangles ``float[K, 3, 3]``.
-
-    The point is projected onto each triangle's plane (least squares); weights sum to 1. A
-    degenerate triangle gives all weight to its first vertex.
-    """
-    e0, e1, v = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], point - tri[:, 0]
-    d00, d01, d11 = (e0 * e0).sum(-1), (e0 * e1).sum(-1), (e1 * e1).sum(-1)
-    d20, d21 = (v * e0).sum(-1), (v * e1).sum(-1)
-    den = d00 * d11 - d01 * d01
-    ok = den > 1e-12 * (d00 * d11).clamp_min(1e-30)
-    den = torch.where(ok, den, torch.ones_like(den))
-    b = torch.where(ok, (d11 * d20 - d01 * d21) / den, torch.zeros_like(den))
-    c = torch.where(ok, (d00 * d21 - d01 * d20) / den, torch.zeros_like(den))
-    return torch.stack((1 - b - c, b, c), dim=-1)
-
-
 def segment_sum(values: Tensor, segment: Tensor, num_segments: int) -> Tensor:
     """Sum rows by segment: ``float[N, ...]``, ``int64[N]`` in ``[0, num_segments)`` -> ``float[S, ...]``."""
     out = values.new_zeros(num_segments, *values.shape[1:])

@@ -6,13 +6,13 @@ translation-equivariant. Each spatial vector ``d`` is followed by its norm ``|d|
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import torch
 from torch import Tensor
 
 from fignet_gym.simulator.collision import FaceContacts
-from fignet_gym.simulator.geometry import barycentric
 from fignet_gym.simulator.scene import ObjectKind, Scene
 
 
@@ -66,6 +66,11 @@ class Graph:
     node_pos: Tensor
     node_scene: Tensor | None = None
 
+    @property
+    def num_objects(self) -> int:
+        """``O``, the number of objects (object nodes, whether or not the network uses them)."""
+        return int(self.object_features.shape[0])
+
     def edge_features(self, name: str) -> Tensor:
         """Features of the edge type ``name`` (mesh, obj_mesh, mesh_obj, face, world)."""
         return {
@@ -108,17 +113,74 @@ def clip_length(d: Tensor, max_len: float) -> Tensor:
     return d * (max_len / n.clamp_min(max_len))
 
 
-# Face-edge feature layout: the paper's 34 columns, then each optional group that is switched on
-# (4 columns each: a vector and its norm), in this order.
+# The paper's 34 face-edge columns: [d_rs, |d_rs|], the sender's and the receiver's three spans
+# with norms, and the two face normals.
 FACE_BASE = 4 * 7 + 6
-FACE_EXTRAS = ("next_separation", "contact_lever", "ballistic_separation")
 
 
-def feature_sizes(history: int, num_props: int = 3, next_separation: bool = False,
-                  contact_lever: bool = False, ballistic_separation: bool = False) -> dict[str, int]:
+@dataclass(frozen=True)
+class FaceEdgeContext:
+    """What an optional face-edge feature group is built from (``C`` edges, ``N`` nodes).
+
+    Attributes:
+        d_rs: ``float[C, 3]`` receiver closest point minus sender closest point.
+        sender_nodes: ``int64[C, 3]`` sender face nodes, sorted by distance to its closest point.
+        kin_disp: ``float[N, 3]`` next-step displacement of kinematic nodes (0 for the others).
+    """
+
+    d_rs: Tensor
+    sender_nodes: Tensor
+    kin_disp: Tensor
+
+
+def _next_separation(ctx: FaceEdgeContext) -> Tensor:
+    """``[d_rs_next, |d_rs_next|] float[C, 4]``: ``d_rs`` with the sender moved by its face's mean
+    next displacement, i.e. the separation a pusher will leave (or the overlap it will make) if
+    the receiver stays. The network could combine ``d_rs`` with the nodes' displacement features
+    itself, but a contact onset hinges on the sign of this millimetre-scale difference, and one
+    feature makes it explicit."""
+    c = ctx.d_rs.shape[0]
+    shift = ctx.kin_disp.index_select(0, ctx.sender_nodes.reshape(-1)).view(c, 3, 3).mean(1)
+    return with_norm(ctx.d_rs - shift)
+
+
+@dataclass(frozen=True)
+class FaceGroup:
+    """An optional group of face-edge feature columns beyond the paper's.
+
+    Attributes:
+        name: the group's name, also the boolean ``SimulatorConfig`` field that switches it on.
+        size: columns it appends.
+        stats_from: first base column whose normaliser statistics the group's columns start from
+            when a warm start adds the group (a column of the same scale).
+        description: what it is, for model cards.
+        build: ``FaceEdgeContext -> float[C, size]``.
+    """
+
+    name: str
+    size: int
+    stats_from: int
+    description: str
+    build: Callable[[FaceEdgeContext], Tensor]
+
+
+# Every optional face-edge group, in layout order: the enabled ones follow the base columns.
+# Graph building, feature sizes, warm starts and model cards all read this table.
+FACE_GROUPS: tuple[FaceGroup, ...] = (
+    FaceGroup("next_separation", 4, 0, "next-step separation from kinematic faces", _next_separation),
+)
+
+
+def enabled_face_groups(config: object) -> tuple[FaceGroup, ...]:
+    """The groups of :data:`FACE_GROUPS` whose flag is set on ``config`` (a ``SimulatorConfig``)."""
+    return tuple(g for g in FACE_GROUPS if getattr(config, g.name))
+
+
+def feature_sizes(history: int, num_props: int = 3,
+                  face_groups: Sequence[FaceGroup] = ()) -> dict[str, int]:
     """Input feature sizes of each graph element for ``history`` velocities."""
     node = 4 * history + num_props + 1 + 4
-    face = FACE_BASE + 4 * (int(next_separation) + int(contact_lever) + int(ballistic_separation))
+    face = FACE_BASE + sum(g.size for g in face_groups)
     return {"node": node, "object": node, "mesh": 8, "obj_mesh": 8, "face": face, "world": 4}
 
 
@@ -133,48 +195,28 @@ def _node_features(pos_hist: Tensor, kin: Tensor, kin_disp: Tensor, props: Tenso
     return torch.cat((with_norm(vel), props, kin[:, None], with_norm(kin_disp)), dim=-1)
 
 
-def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, clip: float = 0.0,
-                       kin_disp: Tensor | None = None, node_com: Tensor | None = None,
-                       node_step: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor]:
+def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, kin_disp: Tensor,
+                       clip: float = 0.0, face_groups: Sequence[FaceGroup] = ()
+                       ) -> tuple[Tensor, Tensor, Tensor]:
     """Face-face hyper-edge features (paper eq. 1) with each face's nodes sorted by distance.
 
     Args:
         pos: ``float[N, 3]`` current node positions.
         faces: ``int64[F, 3]``.
         contacts: ``C`` directed face pairs with closest points.
-        clip: spanning vectors longer than this are shortened (:func:`clip_length`; 0: off).
         kin_disp: ``float[N, 3]`` next-step displacement of kinematic nodes (0 for the others).
-            When given, ``[d_rs_next, |d_rs_next|]`` is appended: ``d_rs`` with the sender moved
-            by its face's mean next displacement, i.e. the separation a pusher will leave (or the
-            overlap it will make) if the receiver stays. The network could combine ``d_rs`` with
-            the nodes' displacement features itself, but a contact onset hinges on the sign of
-            this millimetre-scale difference, and one feature makes it explicit.
-        node_com: ``float[N, 3]`` centre of mass of each node's object. When given,
-            ``[l_r, |l_r|]`` is appended: the receiver's closest point relative to its object's
-            centre of mass (clipped like the spans), the lever arm of the contact force. The
-            torque it makes is one cross product of two features of the same edge, where without
-            it the network must assemble the lever from the face spans and the nodes' offsets to
-            the centre of mass over several message-passing steps.
-        node_step: ``float[N, 3]`` each node's expected displacement over the next step (its
-            last velocity plus the gravity prior if dynamic, its known displacement if not).
-            When given, ``[d_rs_ball, |d_rs_ball|]`` is appended: ``d_rs`` after both closest
-            points move by ``node_step`` interpolated at them (barycentric weights). Whether two
-            faces within ``d_c`` touch within the step (an impact) or pass (a near miss) hinges
-            on this difference of a separation and a relative velocity at the contact point.
+        clip: spanning vectors longer than this are shortened (:func:`clip_length`; 0: off).
+        face_groups: optional groups (:data:`FACE_GROUPS`) appended after the paper's columns.
 
     Returns:
-        ``(senders int64[C, 3], receivers int64[C, 3], features float[C, 34 to 46])`` with features
-        ``[d_rs, |d_rs|, (d_sj, |d_sj|)_j, (d_rj, |d_rj|)_j, n_s, n_r (, d_rs_next, |d_rs_next|)
-        (, l_r, |l_r|) (, d_rs_ball, |d_rs_ball|)]``.
+        ``(senders int64[C, 3], receivers int64[C, 3], features float[C, 34 + group sizes])`` with
+        features ``[d_rs, |d_rs|, (d_sj, |d_sj|)_j, (d_rj, |d_rj|)_j, n_s, n_r, groups...]``.
     """
     c = contacts.sender_face.shape[0]
     # Sender and receiver faces as one batch of 2C rows: [senders; receivers].
     nodes = faces.index_select(0, torch.cat((contacts.sender_face, contacts.receiver_face)))
     point = torch.cat((contacts.sender_point, contacts.receiver_point))
     x = pos.index_select(0, nodes.reshape(-1)).view(-1, 3, 3)  # [2C, vertex, 3]
-    if node_step is not None:  # interpolated in the original vertex order, before sorting
-        moved = (barycentric(x, point)[..., None]
-                 * node_step.index_select(0, nodes.reshape(-1)).view(-1, 3, 3)).sum(1)  # [2C, 3]
     # Normal from the original vertex order (outward by the mesh's winding), before sorting.
     n = torch.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0], dim=-1)
     n = n / n.norm(dim=-1, keepdim=True).clamp_min(1e-12)
@@ -185,44 +227,36 @@ def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, clip:
     d_rs = contacts.receiver_point - contacts.sender_point
     # [d_rs, sender spans, receiver spans]: with_norm appends each 3-vector's norm in one pass.
     vecs = with_norm(torch.cat((d_rs, span[:c].reshape(c, 9), span[c:].reshape(c, 9)), dim=-1))
-    out = [vecs, n[:c], n[c:]]
-    if kin_disp is not None:
-        shift = kin_disp.index_select(0, nodes[:c].reshape(-1)).view(c, 3, 3).mean(1)
-        out.append(with_norm(d_rs - shift))
-    if node_com is not None:
-        com_r = node_com.index_select(0, faces[contacts.receiver_face, 0])
-        out.append(with_norm(clip_length(contacts.receiver_point - com_r, clip)))
-    if node_step is not None:
-        out.append(with_norm(d_rs + moved[c:] - moved[:c]))
+    ctx = FaceEdgeContext(d_rs=d_rs, sender_nodes=nodes[:c], kin_disp=kin_disp)
+    out = [vecs, n[:c], n[c:], *(g.build(ctx) for g in face_groups)]
     return nodes[:c], nodes[c:], torch.cat(out, dim=-1)
 
 
 def _static_features(scene: Scene, clip: float) -> dict[str, Tensor]:
-    """Pose-independent parts of the features, cached in the scene (they never change).
+    """Pose-independent parts of the features, memoised on the scene (they never change).
 
     Keys: ``kin float[N + O]`` kinematic flags of mesh nodes then objects, ``props float[N + O, P]``,
     ``mesh_ref float[E, 4]`` reference mesh edge vectors with norms, ``rel_ref float[N, 4]``
     reference (clipped) node offsets from the centre of mass with norms.
     """
-    key = ("graph_static", clip)
-    if key not in scene._cache:
+
+    def build() -> dict[str, Tensor]:
         kin_obj = (scene.object_kind != ObjectKind.DYNAMIC).to(scene.ref_vertices.dtype)
         s, r = scene.mesh_edges
         ref = scene.ref_vertices
-        scene._cache[key] = {
+        return {
             "kin": torch.cat((kin_obj[scene.node_object], kin_obj)),
             "props": torch.cat((scene.object_props[scene.node_object], scene.object_props)),
             "mesh_ref": with_norm(ref[s] - ref[r]),
             "rel_ref": with_norm(clip_length(ref - scene.object_com[scene.node_object], clip)),
         }
-    return scene._cache[key]
+
+    return scene.cached(("graph_static", clip), build)
 
 
 def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Tensor,
-                com_next: Tensor, contacts: FaceContacts | None,
-                node_edges: tuple[Tensor, Tensor] | None = None, clip: float = 0.0,
-                next_separation: bool = False, contact_lever: bool = False,
-                gravity_step: Tensor | None = None) -> Graph:
+                com_next: Tensor, contacts: FaceContacts, node_edges: tuple[Tensor, Tensor],
+                clip: float = 0.0, face_groups: Sequence[FaceGroup] = ()) -> Graph:
     """Assemble all un-normalised input features.
 
     Args:
@@ -231,14 +265,12 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
         com_hist: ``float[H, O, 3]`` centre-of-mass positions, oldest first.
         node_next: ``float[N, 3]`` next positions (used for kinematic nodes only).
         com_next: ``float[O, 3]`` next centre-of-mass positions (kinematic objects only).
-        contacts: face-face contacts at the current positions (``None``: no face edges).
-        node_edges: optional MeshGraphNets-style node-node collision edges ``(senders, receivers)``.
+        contacts: face-face contacts at the current positions (none for the node baseline).
+        node_edges: MeshGraphNets-style node-node collision edges ``(senders int64[W], receivers
+            int64[W])`` (none for FIGNet's face edges).
         clip: length (m) above which face spanning vectors and object-mesh offsets are shortened
             (0: the paper's unclipped features).
-        next_separation: append the next-step separation to face features
-            (:func:`face_edge_features`); contact_lever: the receiver's lever arm, likewise.
-        gravity_step: ``float[3]`` gravity prior (m per step^2); when given, the separation after
-            a ballistic step is appended to face features likewise (``ballistic_separation``).
+        face_groups: optional face-edge feature groups (:data:`FACE_GROUPS`) to append.
     """
     static = _static_features(scene, clip)
     n = node_hist.shape[1]
@@ -260,25 +292,9 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
     om_f = torch.cat((rel * flip, static["rel_ref"] * flip), dim=-1)
     mo_f = torch.cat((rel, static["rel_ref"]), dim=-1)
 
-    empty_i = torch.zeros(0, dtype=torch.long, device=cur.device)
-    if contacts is not None:
-        step = None
-        if gravity_step is not None:
-            vel = node_hist[-1] - node_hist[-2] + gravity_step
-            step = torch.where(static["kin"][:n, None] > 0, kin_disp[:n], vel)
-        fs, fr, ff = face_edge_features(cur, scene.faces, contacts, clip,
-                                        kin_disp[:n] if next_separation else None,
-                                        node_com if contact_lever else None, step)
-    else:
-        fs = fr = empty_i.reshape(0, 3)
-        ff = cur.new_zeros(0, feature_sizes(1, next_separation=next_separation, contact_lever=contact_lever,
-                                            ballistic_separation=gravity_step is not None)["face"])
-    if node_edges is not None:
-        ns, nr = node_edges
-        nf = with_norm(cur[ns] - cur[nr])
-    else:
-        ns = nr = empty_i
-        nf = cur.new_zeros(0, 4)
+    fs, fr, ff = face_edge_features(cur, scene.faces, contacts, kin_disp[:n], clip, face_groups)
+    ns, nr = node_edges
+    nf = with_norm(cur[ns] - cur[nr])
     return Graph(
         node_features=node_f, object_features=obj_f, node_object=scene.node_object,
         obj_mesh_features=om_f, mesh_obj_features=mo_f,

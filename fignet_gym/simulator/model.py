@@ -9,29 +9,45 @@ into rigid poses.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import torch
 from torch import Tensor, nn
 
-from fignet_gym.simulator.collision import FaceContacts, find_face_contacts
+from fignet_gym.simulator.collision import (
+    FaceContacts,
+    find_face_contacts,
+    no_face_contacts,
+    no_node_edges,
+    node_collision_edges,
+)
 from fignet_gym.simulator.geometry import (
     axis_angle_to_quat,
     kabsch,
     quat_mul,
     quat_normalize,
     quat_rotate,
+    rigid_moments,
     rigid_projection,
     segment_sum,
 )
-from fignet_gym.simulator.graph import Graph, build_graph, feature_sizes
+from fignet_gym.simulator.graph import FaceGroup, Graph, build_graph, enabled_face_groups, feature_sizes
 from fignet_gym.simulator.networks import EncodeProcessDecode
 from fignet_gym.simulator.normalization import Normalizer
 from fignet_gym.simulator.scene import MeshOptions, Scene
 
 CHECKPOINT_FORMAT = "fignet_gym.checkpoint/1"
+
+# Settings of retired experiments (no gain measured: docs/experiments.md) and the one value each
+# still accepts, so that checkpoints and configs written while they existed keep loading.
+RETIRED_KEYS: dict[str, Any] = {
+    "kinematic_receivers": False,
+    "contact_lever": False,
+    "free_flight": False,
+    "ballistic_separation": False,
+}
 
 
 class CheckpointError(ValueError):
@@ -51,15 +67,14 @@ class SimulatorConfig:
         mesh_edges: use mesh-mesh edges (FIGNet* drops them for speed).
         object_nodes: use one virtual node per object.
         collision: ``"face"`` (FIGNet face-face hyper-edges) or ``"node"`` (MeshGraphNets node-node).
-        collision_radius: ``d_c`` (m).
+        collision_radius: ``d_c`` (m). Face-face edges whose receiver face belongs to a static or
+            kinematic object are dropped: the paper keeps both directions, but those receivers'
+            motion is given anyway, and dropping them halves the edges with the floor and the
+            pusher for the same messages into every dynamic node.
         feature_clip: length (m) above which face spanning vectors and object-mesh offsets are
             shortened (0: off, the paper's features). Two-triangle floors have spans of metres
             beside the centimetres of objects: clipping keeps the small ones visible after
             normalisation.
-        kinematic_receivers: keep face-face edges whose receiver face belongs to a static or
-            kinematic object. The paper keeps both directions; dropping these (default) halves the
-            edges with the floor and the pusher, whose motion is given anyway, for the same
-            messages into every dynamic node.
         noise_std: std (m) of the random-walk training noise at the last input frame.
         rotation_noise_std: std (rad) of its rotational part at the last input frame (0: the
             rotation that moves nodes at the object's RMS radius by ``noise_std``). A pushed
@@ -72,27 +87,13 @@ class SimulatorConfig:
             precision is spent on contacts (whose large accelerations set the target scale and so
             would otherwise limit how precisely it can output the small free-fall term).
         next_separation: append to face-face features the separation a kinematic sender face
-            will leave after its known next displacement (see ``graph.face_edge_features``); not
-            in the paper, for contact onsets under a pusher.
-        contact_lever: append to face-face features the receiver's closest point relative to its
-            object's centre of mass, the lever arm of the contact force (not in the paper; for
-            the yaw a push makes).
+            will leave after its known next displacement (the ``next_separation`` group of
+            ``graph.FACE_GROUPS``); not in the paper, for contact onsets under a pusher.
         rigid_output: project the network's node accelerations onto each object's rigid motions
             (:func:`geometry.rigid_projection`) before the loss and in every step (not in the
             paper, which shape-matches only in rollouts). The network may then express a contact
             as a force at the nodes it touches, and the projection turns it into the torque about
             the centroid analytically, instead of each node having to compute ``alpha x r``.
-        free_flight: objects whose nodes receive no collision edge fall freely: their predicted
-            residual (beyond the gravity prior) is set to zero, in every step and in the loss (not
-            in the paper). Such an object's graph is cut off from every other object and features
-            are translation invariant, so the network cannot see the floor or another object; the
-            best it could output is an average over the data of what happens next (an impact
-            within the step, the training noise's correction). Rigid bodies in vacuum without
-            contacts fall freely, so this is exact.
-        ballistic_separation: append to face-face features the separation of the two closest
-            points after one step in which every node moves on at its last velocity (plus the
-            gravity prior; kinematic nodes by their known displacement): whether faces within
-            ``d_c`` collide within the step or pass (not in the paper; for impacts and near misses).
         scene_type: what the model was trained on ("push", "toss", ...; "" = unspecified).
         mesh_options: how MuJoCo primitives are meshed for this model.
     """
@@ -107,16 +108,12 @@ class SimulatorConfig:
     collision: str = "face"
     collision_radius: float = 0.02
     feature_clip: float = 0.0
-    kinematic_receivers: bool = False
     noise_std: float = 0.0
     rotation_noise_std: float = 0.0
     vertical_weight: float = 1.0
     gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     next_separation: bool = False
-    contact_lever: bool = False
     rigid_output: bool = False
-    free_flight: bool = False
-    ballistic_separation: bool = False
     scene_type: str = ""
     mesh_options: MeshOptions = field(default_factory=MeshOptions)
 
@@ -126,18 +123,30 @@ class SimulatorConfig:
         if self.history < 1 or self.dt <= 0 or self.collision_radius <= 0:
             raise ValueError("history >= 1, dt > 0 and collision_radius > 0 are required")
 
+    @property
+    def face_groups(self) -> tuple[FaceGroup, ...]:
+        """The optional face-edge feature groups this config switches on, in layout order."""
+        return enabled_face_groups(self)
+
     def to_dict(self) -> dict[str, Any]:
         """Plain-type dictionary (safe for ``torch.load(weights_only=True)``)."""
         return asdict(self)
 
     @staticmethod
     def from_dict(d: dict[str, Any]) -> SimulatorConfig:
-        """Inverse of :meth:`to_dict`; unknown keys are an error."""
+        """Inverse of :meth:`to_dict`; unknown keys are an error, and so is a retired key
+        (:data:`RETIRED_KEYS`) set to anything but the one value it still accepts."""
+        d = dict(d)
+        for key, accepted in RETIRED_KEYS.items():
+            if key in d:
+                if d.pop(key) != accepted:
+                    raise CheckpointError(
+                        f"config key {key!r} is a retired experiment: only {key}={accepted!r} is "
+                        "supported (docs/experiments.md)")
         known = {f.name for f in fields(SimulatorConfig)}
         unknown = set(d) - known
         if unknown:
             raise CheckpointError(f"unknown config keys {sorted(unknown)}")
-        d = dict(d)
         if "gravity" in d:
             d["gravity"] = tuple(float(g) for g in d["gravity"])
         if isinstance(d.get("mesh_options"), dict):
@@ -153,7 +162,26 @@ class StepInputs:
     graph: Graph
     node_hist: Tensor
     node_next: Tensor
-    contacts: FaceContacts | None
+    contacts: FaceContacts
+
+
+@dataclass(frozen=True)
+class TrainingExample:
+    """One-step supervision (:meth:`LearnedSimulator.training_example`).
+
+    Attributes:
+        graph: raw input features of the noisy history.
+        target: ``float[N, 3]`` acceleration (m per step^2) minus the gravity prior that maps the
+            noisy inputs onto the true next positions plus the last frame's noise.
+        weight: ``float[N]`` per-node loss weight (1 for dynamic nodes, 0 for the others).
+        true_node_pos: ``float[N, 3]`` the true (noise-free) current node positions, about which
+            the loss's rotational terms are taken.
+    """
+
+    graph: Graph
+    target: Tensor
+    weight: Tensor
+    true_node_pos: Tensor
 
 
 class LearnedSimulator(nn.Module):
@@ -163,8 +191,7 @@ class LearnedSimulator(nn.Module):
         super().__init__()
         self.config = config or SimulatorConfig()
         c = self.config
-        sizes = feature_sizes(c.history, next_separation=c.next_separation,
-                              contact_lever=c.contact_lever, ballistic_separation=c.ballistic_separation)
+        sizes = feature_sizes(c.history, face_groups=c.face_groups)
         face, node = c.collision == "face", c.collision == "node"
         self.net = EncodeProcessDecode(
             sizes, latent=c.latent_size, hidden=c.hidden_size or c.latent_size,
@@ -195,24 +222,21 @@ class LearnedSimulator(nn.Module):
         node_hist, node_next, com_hist, com_next = nodes[:-1], nodes[-1], coms[:-1], coms[-1]
         contacts, node_edges = self.collide(scene, node_hist[-1])
         graph = build_graph(scene, node_hist, com_hist, node_next, com_next, contacts, node_edges,
-                            clip=self.config.feature_clip, next_separation=self.config.next_separation,
-                            contact_lever=self.config.contact_lever,
-                            gravity_step=self.gravity_step() if self.config.ballistic_separation else None)
+                            clip=self.config.feature_clip, face_groups=self.config.face_groups)
         return StepInputs(graph, node_hist, node_next, contacts)
 
-    def collide(self, scene: Scene, node_pos: Tensor
-                ) -> tuple[FaceContacts | None, tuple[Tensor, Tensor] | None]:
-        """Collision edges at node positions ``float[N, 3]``: ``(face contacts, None)`` for face
-        collisions (without kinematic receivers unless configured), ``(None, node edges)`` else."""
+    def collide(self, scene: Scene, node_pos: Tensor) -> tuple[FaceContacts, tuple[Tensor, Tensor]]:
+        """Collision edges at node positions ``float[N, 3]``: ``(face contacts, node edges)``, of
+        which the kind not configured (``collision``) is empty. Face contacts keep receivers on
+        dynamic objects only."""
+        radius = self.config.collision_radius
         if self.config.collision != "face":
-            return None, node_collision_edges(scene, node_pos, self.config.collision_radius)
-        contacts = find_face_contacts(node_pos, scene.faces, scene.face_object,
-                                      scene.collision_pairs, self.config.collision_radius)
-        if not self.config.kinematic_receivers:
-            keep = scene.dynamic_mask[scene.face_object[contacts.receiver_face]].nonzero().squeeze(1)
-            contacts = FaceContacts(*(getattr(contacts, f.name).index_select(0, keep)
-                                      for f in fields(contacts)))
-        return contacts, None
+            edges = node_collision_edges(node_pos, scene.node_object, scene.collision_pairs, radius)
+            return no_face_contacts(node_pos), edges
+        contacts = find_face_contacts(node_pos, scene.faces, scene.face_object, scene.collision_pairs, radius)
+        keep = scene.dynamic_mask[scene.face_object[contacts.receiver_face]].nonzero().squeeze(1)
+        contacts = FaceContacts(*(getattr(contacts, f.name).index_select(0, keep) for f in fields(contacts)))
+        return contacts, no_node_edges(node_pos)
 
     def normalize(self, g: Graph, accumulate: bool = False) -> Graph:
         """Normalise every feature tensor (accumulating statistics when training)."""
@@ -238,24 +262,13 @@ class LearnedSimulator(nn.Module):
             with torch.autocast(self.device.type, dtype=self.inference_dtype):
                 out = self.net(graph).float()
         acc = self._rigid(self.target_norm.inverse(out), graph)
-        if self.config.free_flight:
-            acc = acc * self.objects_in_contact(graph)[graph.node_object, None]
         return acc + self.gravity_step()
 
     def _rigid(self, acc: Tensor, graph: Graph) -> Tensor:
         """Accelerations ``float[N, 3]`` (m per step^2) projected per object if ``rigid_output``."""
         if not self.config.rigid_output:
             return acc
-        return rigid_projection(acc, graph.node_pos, graph.node_object, graph.object_features.shape[0])
-
-    @staticmethod
-    def objects_in_contact(graph: Graph) -> Tensor:
-        """``bool[O]``: whether a node of the object receives at least one collision edge."""
-        obj = graph.node_object
-        recv = torch.cat((graph.face_edges.receivers.reshape(-1), graph.node_edges.receivers))
-        hit = torch.zeros(graph.object_features.shape[0], dtype=torch.bool, device=obj.device)
-        hit[obj[recv]] = True
-        return hit
+        return rigid_projection(acc, graph.node_pos, graph.node_object, graph.num_objects)
 
     def gravity_step(self) -> Tensor:
         """The gravity prior ``g dt^2`` (m per step^2), ``float[3]``."""
@@ -309,7 +322,7 @@ class LearnedSimulator(nn.Module):
 
     # ------------------------------------------------------------------ training
     def training_example(self, scene: Scene, poses: Tensor, generator: torch.Generator | None = None,
-                         inputs: Tensor | None = None) -> tuple[Graph, Tensor, Tensor]:
+                         inputs: Tensor | None = None) -> TrainingExample:
         """Noisy inputs and the acceleration target for one-step supervision.
 
         Args:
@@ -320,10 +333,9 @@ class LearnedSimulator(nn.Module):
                 ``poses[:-1]`` (the model's own rollout, for pushforward training).
 
         Returns:
-            ``(graph, target float[N, 3], node_weight float[N])``: raw features, the acceleration
-            that maps the noisy inputs onto the true next positions (plus the last frame's noise,
-            which no model can see) minus the gravity prior, and a per-node loss weight (0 for
-            non-dynamic nodes, and with ``free_flight`` for objects without collision edges).
+            A :class:`TrainingExample` whose target is the acceleration that maps the noisy
+            inputs onto the true next positions plus the last frame's noise, minus the gravity
+            prior.
         """
         hist, nxt = poses[:-1], poses[-1]
         noisy = inputs if inputs is not None else self.pose_noise(scene, hist, generator)
@@ -334,12 +346,8 @@ class LearnedSimulator(nn.Module):
         # is to undo the velocity noise (as in learning_to_simulate).
         target_next = scene.node_positions(nxt) + noise_last
         target = target_next - 2 * inputs.node_hist[-1] + inputs.node_hist[-2] - self.gravity_step()
-        live = scene.dynamic_mask
-        if self.config.free_flight:
-            # A free object's prediction is fixed: its target (the noise's correction) teaches nothing.
-            live = live & self.objects_in_contact(inputs.graph)
-        weight = live[scene.node_object].to(target.dtype)
-        return inputs.graph, target, weight
+        weight = scene.dynamic_mask[scene.node_object].to(target.dtype)
+        return TrainingExample(inputs.graph, target, weight, x_true_t)
 
     def pose_noise(self, scene: Scene, hist: Tensor, gen: torch.Generator | None) -> Tensor:
         """Rigid random-walk noise on dynamic objects' poses: ``float[H, O, 7] -> float[H, O, 7]``.
@@ -379,22 +387,43 @@ class LearnedSimulator(nn.Module):
         n = segment_sum(torch.ones_like(d2), scene.node_object, scene.num_objects)
         return (s / n.clamp_min(1)).sqrt().clamp_min(1e-4)
 
-    def loss(self, graph: Graph, target: Tensor, weight: Tensor, accumulate: bool = True
-             ) -> tuple[Tensor, Tensor]:
-        """Weighted MSE of normalised accelerations over dynamic nodes.
-
-        Returns ``(loss scalar, normalised prediction float[N, 3])`` so that callers can add terms
-        without running the network twice.
-        """
-        if accumulate:
-            self.target_norm.accumulate(target[weight > 0])
+    def training_prediction(self, graph: Graph, accumulate: bool = False) -> Tensor:
+        """The network's normalised acceleration prediction ``float[N, 3]`` with gradients, as the
+        loss sees it (rigidly projected if ``rigid_output``, like every step); ``accumulate``
+        updates the feature normalisers' statistics."""
         pred = self.net(self.normalize(graph, accumulate))
         if self.config.rigid_output:
             pred = self.target_norm(self._rigid(self.target_norm.inverse(pred), graph))
-        err = (pred - self.target_norm(target)) ** 2
+        return pred
+
+    def loss(self, example: TrainingExample, rigid_weight: float = 0.0, accumulate: bool = True) -> Tensor:
+        """The training loss of one (batched) example: scalar.
+
+        The weighted MSE of normalised accelerations over dynamic nodes (z weighted by
+        ``vertical_weight``), plus ``rigid_weight`` times the per-object linear and rotational
+        acceleration terms (:func:`rigid_terms`), which isolate the rotation that a plain per-node
+        MSE lets translation and noise drown (the yaw of a pushed object). ``accumulate`` updates
+        the normalisers' statistics (target first, so that an early loss is already normalised).
+        """
+        graph, target, weight = example.graph, example.target, example.weight
+        norm = self.target_norm
+        if accumulate:
+            norm.accumulate(target[weight > 0])
+        pred_n = self.training_prediction(graph, accumulate)
+        err = (pred_n - norm(target)) ** 2
         comp = err.new_tensor([1.0, 1.0, self.config.vertical_weight])
         loss = (err * comp).sum(-1).mul(weight).sum() / (weight.sum() * comp.sum()).clamp_min(1.0)
-        return loss, pred
+        if rigid_weight <= 0:
+            return loss
+        # One isotropic scale (not per axis) keeps cross products meaningful.
+        scale = norm.std.mean().to(pred_n.dtype)
+        seg, n_obj = graph.node_object, graph.num_objects
+        lin_p, ang_p = rigid_terms(example.true_node_pos, norm.inverse(pred_n) / scale, seg, n_obj)
+        lin_t, ang_t = rigid_terms(example.true_node_pos, target / scale, seg, n_obj)
+        live = segment_sum(weight, seg, n_obj) > 0  # the objects the node term supervises
+        n = live.sum().clamp_min(1)  # a batch may have no dynamic object
+        rigid = ((lin_p - lin_t)[live].pow(2).sum() + (ang_p - ang_t)[live].pow(2).sum()) / (3 * n)
+        return loss + rigid_weight * rigid
 
     # ------------------------------------------------------------------ checkpoints
     def save(self, path: str | Path, meta: dict[str, Any] | None = None) -> None:
@@ -424,7 +453,10 @@ class LearnedSimulator(nn.Module):
             raise CheckpointError(f"{path}: not a readable fignet_gym checkpoint ({exc})") from exc
         if not isinstance(blob, dict) or blob.get("format") != CHECKPOINT_FORMAT:
             raise CheckpointError(f"{path}: not a fignet_gym checkpoint (format tag missing)")
-        config = SimulatorConfig.from_dict(blob["config"])
+        try:
+            config = SimulatorConfig.from_dict(blob["config"])
+        except CheckpointError as exc:
+            raise CheckpointError(f"{path}: {exc}") from exc
         sim = LearnedSimulator(config)
         try:
             sim.load_state_dict(sim.upgrade_state_dict(blob["state_dict"]))
@@ -441,30 +473,16 @@ class LearnedSimulator(nn.Module):
         own = self.state_dict()
         return {k: v for k, v in state.items() if k in own or not k.startswith(stale)}
 
-    def with_config(self, **changes: Any) -> SimulatorConfig:
-        """A copy of this simulator's config with some fields changed."""
-        return replace(self.config, **changes)
 
+def rigid_terms(pos: Tensor, acc: Tensor, node_object: Tensor, num_objects: int) -> tuple[Tensor, Tensor]:
+    """Per-object linear and rotational parts of node accelerations ``acc float[N, 3]`` at node
+    positions ``pos float[N, 3]`` (nodes of object ``node_object int64[N]``).
 
-def node_collision_edges(scene: Scene, pos: Tensor, radius: float) -> tuple[Tensor, Tensor]:
-    """MeshGraphNets "world edges": node pairs of candidate object pairs closer than ``radius``.
-
-    ``pos float[N, 3] -> (senders int64[W], receivers int64[W])``, both directions. Vectorised over
-    all candidate node pairs (fine for the baselines' scene sizes).
+    The rotational part is ``r_rms * sum_i r_i x a_i / sum_i |r_i|^2`` (``r`` from the object's
+    node centroid): an angular acceleration expressed as the tangential acceleration at the
+    object's RMS radius, so it has the units (and scale) of node accelerations. Both terms are
+    linear in ``acc``, so cheap and differentiable. Returns ``(float[O, 3], float[O, 3])``.
     """
-    pairs = scene.collision_pairs
-    if pairs.shape[0] == 0:
-        empty = torch.zeros(0, dtype=torch.long, device=pos.device)
-        return empty, empty
-    counts = torch.bincount(scene.node_object, minlength=scene.num_objects)
-    starts = torch.cumsum(counts, 0) - counts  # nodes are contiguous per object
-    ca, cb = counts[pairs[:, 0]], counts[pairs[:, 1]]
-    per_pair = ca * cb
-    pair_id = torch.repeat_interleave(torch.arange(pairs.shape[0], device=pos.device), per_pair)
-    offset = torch.arange(int(per_pair.sum()), device=pos.device) - torch.repeat_interleave(
-        torch.cumsum(per_pair, 0) - per_pair, per_pair)
-    a = starts[pairs[pair_id, 0]] + offset // cb[pair_id]
-    b = starts[pairs[pair_id, 1]] + offset % cb[pair_id]
-    close = ((pos[a] - pos[b]) ** 2).sum(-1) < radius**2
-    a, b = a[close], b[close]
-    return torch.cat((a, b)), torch.cat((b, a))
+    count, r, lin, torque = rigid_moments(acc, pos, node_object, num_objects)
+    r2 = segment_sum((r * r).sum(-1), node_object, num_objects).clamp_min(1e-12)
+    return lin, torque / r2[:, None] * (r2 / count).sqrt()[:, None]

@@ -9,15 +9,18 @@ one graph. Conventions (object kinds, restitution, poses) are in ``docs/architec
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass, field, replace
 from enum import IntEnum
+from typing import TypeVar
 
 import mujoco
 import numpy as np
 import torch
 import trimesh
 from torch import Tensor
+
+T = TypeVar("T")
 
 
 class ObjectKind(IntEnum):
@@ -341,18 +344,26 @@ class Scene:
 
     def repeat(self, count: int) -> Scene:
         """``count`` copies of this scene as one batch (cached: envs ask for it every step)."""
-        key = ("repeat", count)
-        if key not in self._cache:
-            self._cache[key] = Scene.batch([self] * count)
-        return self._cache[key]
+        return self.cached(("repeat", count), lambda: Scene.batch([self] * count))
 
     def to(self, device: torch.device | str) -> Scene:
         """The same scene with every tensor on ``device``."""
-        key = ("to", str(device))
-        if key not in self._cache:
+        def build() -> Scene:
             moved = {k: (v.to(device) if isinstance(v, Tensor) else v)
                      for k, v in self.__dict__.items() if k != "_cache"}
-            self._cache[key] = Scene(**moved)
+            return Scene(**moved)
+
+        return self.cached(("to", str(device)), build)
+
+    def cached(self, key: Hashable, build: Callable[[], T]) -> T:
+        """``build()``, computed once per scene and ``key`` and then memoised.
+
+        For data derived from the topology alone (a scene never changes): batched copies, collision
+        pairs, the pose-independent parts of graph features. ``key`` must name everything the
+        value depends on besides the scene.
+        """
+        if key not in self._cache:
+            self._cache[key] = build()
         return self._cache[key]
 
     # ----------------------------------------------------------------- queries
@@ -380,13 +391,14 @@ class Scene:
         Pairs of two non-dynamic objects (a pusher touching the floor) never need an edge: neither
         object's motion is predicted.
         """
-        if "pairs" not in self._cache:
+        def build() -> Tensor:
             i, j = torch.triu_indices(self.num_objects, self.num_objects, 1,
                                       device=self.object_kind.device)
             keep = (self.object_scene[i] == self.object_scene[j]) & (
                 self.dynamic_mask[i] | self.dynamic_mask[j])
-            self._cache["pairs"] = torch.stack((i[keep], j[keep]), dim=1)
-        return self._cache["pairs"]
+            return torch.stack((i[keep], j[keep]), dim=1)
+
+        return self.cached("pairs", build)
 
     def node_positions(self, poses: Tensor) -> Tensor:
         """World node positions. ``float[..., O, 7] -> float[..., N, 3]``."""

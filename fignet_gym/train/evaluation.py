@@ -466,9 +466,3 @@ def _label(frame: np.ndarray, text: str) -> np.ndarray:
     draw.rectangle((0, 0, 8 + 7 * len(text), 20), fill=(0, 0, 0))
     draw.text((4, 4), text, fill=(255, 255, 255))
     return np.asarray(img)
-
-
-def rollout_errors_tensor(pred: Tensor, true: Tensor, scene: Scene) -> Tensor:
-    """Convenience: ``float[T, 2]`` (translation m, rotation deg) for one scene."""
-    tr, rot = errors(scene, pred, true)
-    return torch.stack((tr[:, 0], rot[:, 0]), -1)

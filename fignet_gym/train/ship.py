@@ -66,8 +66,7 @@ collision edges with d_c = {c.collision_radius} m, history {c.history} velocitie
 dt = {c.dt} s, scene type `{c.scene_type}`, {n_params / 1e6:.2f} M parameters.
 Face-edge features beyond the paper's: {_extras(c)}.
 Output: per-node accelerations, {"projected onto each object's rigid motions in training and in every step"
-if c.rigid_output else "shape matched into poses in rollouts (as in the paper)"}{
-"; objects receiving no collision edge fall freely (free_flight)" if c.free_flight else ""}.
+if c.rigid_output else "shape matched into poses in rollouts (as in the paper)"}.
 Mesh options: {c.mesh_options}.
 
 ## Training
@@ -111,10 +110,7 @@ teacher-forced one-step spin gain (slope of predicted on true change of angular 
 
 
 def _extras(c: SimulatorConfig) -> str:
-    names = {"next_separation": "next-step separation from kinematic faces",
-             "contact_lever": "contact lever arm (receiver point from its centre of mass)",
-             "ballistic_separation": "separation after a ballistic step"}
-    return ", ".join(v for k, v in names.items() if getattr(c, k)) or "none"
+    return ", ".join(g.description for g in c.face_groups) or "none"
 
 
 def _free_flight(m: dict) -> str:

@@ -30,12 +30,16 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from fignet_gym.data.format import Trajectory, load_trajectories
+from fignet_gym.data.format import Trajectory, build_scene, load_trajectories
 from fignet_gym.pretrained import load_checkpoint
-from fignet_gym.simulator.geometry import quat_mul, rigid_moments, segment_sum
-from fignet_gym.simulator.graph import FACE_BASE, FACE_EXTRAS
+from fignet_gym.simulator.geometry import quat_mul
+from fignet_gym.simulator.graph import FACE_BASE, FACE_GROUPS
 from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
 from fignet_gym.simulator.scene import Scene
+
+# Training settings of retired experiments and the one value each still accepts (as
+# ``model.RETIRED_KEYS`` for the simulator's), so that run configs that name them keep loading.
+RETIRED_TRAINING_KEYS: dict[str, Any] = {"start_weight": 1.0}
 
 
 @dataclass(frozen=True)
@@ -53,7 +57,6 @@ class TrainConfig:
             after the window: those (a pusher closing in, not yet touching; an object that has
             just stopped) weigh ``near_motion_weight``, so that the model learns when contact has
             not begun yet and that an object once stopped stays put.
-        start_weight: extra factor on windows whose supervised step starts an object from rest.
         rigid_loss_weight: weight of the per-object linear and angular acceleration loss terms.
         unroll_steps: pushforward training: each batch first rolls the model out for ``k`` steps
             (``k`` uniform in ``0..unroll_steps``, no gradient) from noisy inputs, then is
@@ -81,7 +84,6 @@ class TrainConfig:
     still_weight: float = 0.1
     near_motion_poses: int = 10
     near_motion_weight: float = 3.0
-    start_weight: float = 1.0
     rigid_loss_weight: float = 1.0
     unroll_steps: int = 0
     unroll_after: int = 0
@@ -96,15 +98,21 @@ class TrainConfig:
 
     @staticmethod
     def from_dict(d: dict[str, Any]) -> TrainConfig:
-        """Build from a dict; unknown keys are an error."""
+        """Build from a dict; unknown keys are an error, and so is a retired key
+        (:data:`RETIRED_TRAINING_KEYS`) set to anything but the one value it still accepts."""
+        d = dict(d)
+        for key, accepted in RETIRED_TRAINING_KEYS.items():
+            if key in d and d.pop(key) != accepted:
+                raise ValueError(f"training config key {key!r} is a retired experiment: only "
+                                 f"{key}={accepted!r} is supported (docs/experiments.md)")
         unknown = set(d) - {f.name for f in fields(TrainConfig)}
         if unknown:
             raise ValueError(f"unknown training config keys {sorted(unknown)}")
         return TrainConfig(**d)
 
 
-# Latent 64, 5 message-passing steps, no mesh-mesh edges (FIGNet*): ~4x cheaper per graph than
-# the paper's size on these CPUs, which buys more graphs per CPU hour.
+# Latent 64, 5 message-passing steps, no mesh-mesh edges (FIGNet*): cheaper per graph than the
+# paper's size, so a CPU budget sees more graphs (docs/experiments.md, "Speed").
 _CPU_SIZE = dict(latent_size=64, message_passing_steps=5, mesh_edges=False)
 # The pusher is meshed as an octagonal prism (0.4 mm from its true 4.75 mm radius): fewer faces.
 _PUSH_SCENE = dict(_CPU_SIZE, collision_radius=0.01, vertical_weight=0.1, scene_type="push",
@@ -113,31 +121,31 @@ _PUSH_SCENE = dict(_CPU_SIZE, collision_radius=0.01, vertical_weight=0.1, scene_
 _PUSH_MODEL = dict(_PUSH_SCENE, noise_std=5e-5, rotation_noise_std=5e-3, next_separation=True)
 
 PRESETS: dict[str, dict[str, dict[str, Any]]] = {
+    # A push model from scratch on a CPU budget: the CPU size, one-step training only.
     "push-cpu": {"simulator": dict(_PUSH_SCENE), "training": dict(batch_size=8, valid_horizon=25)},
     # The last stage of the shipped push model (see its model card), for fine-tuning a trained
-    # push model (--init): pushforward from step 0 at a low learning rate. From scratch it does
-    # badly: a random model's pushforward states are junk (measured: 3x the no-motion error after
-    # 0.3 CPU hours; push-cpu's first run was at 0.6x after 0.1).
+    # push model (--init): pushforward from step 0 at a low learning rate. Not for training from
+    # scratch: a random model's pushforward states are junk to learn from.
     "push-finetune": {"simulator": dict(_PUSH_MODEL),
                       "training": dict(batch_size=16, lr=1e-4, lr_final=1e-5, unroll_steps=6,
                                        rigid_loss_weight=3.0, valid_every=500, valid_trajectories=100,
                                        valid_horizon=25)},
-    # From scratch: push-finetune's model with the rigid output projection, a higher learning rate
-    # and plain one-step training before pushforward (from step 1500). Not yet a shipped model's
-    # recipe: on 10000 pushes it reached the shipped push model's validation errors within ~10%
-    # at about half its CPU hours (README, "Model size").
+    # A push model from scratch: push-finetune's model with the rigid output projection, a higher
+    # learning rate and plain one-step training before pushforward (from step 1500). No shipped
+    # model was trained with it (docs/experiments.md, "Pushing from scratch").
     "push-scratch": {"simulator": dict(_PUSH_MODEL, rigid_output=True),
                      "training": dict(steps=40_000, batch_size=16, lr=5e-4, lr_final=1e-5, unroll_steps=6,
                                       unroll_after=1500, rigid_loss_weight=3.0, valid_every=1000,
                                       valid_trajectories=100, valid_horizon=25)},
-    # Pushforward (up to 3 steps) once 5000 plain steps have taught the model something, the
-    # weight average, and the rigid output projection. The shipped toss model is one run of this
-    # preset (its model card names the step).
+    # Tossing from scratch, the shipped toss model's recipe (one run of this preset; its model card
+    # names the step): gravity prior, rigid output projection, pushforward (up to 3 steps) once
+    # 5000 plain steps have taught the model something.
     "toss-cpu": {"simulator": dict(_CPU_SIZE, collision_radius=0.1, scene_type="toss",
                                    gravity=(0.0, 0.0, -10.0), feature_clip=3.0, rigid_output=True),
-                 # Selection on 50 validation tosses: 10-15% differences on 16 were noise.
+                 # Select on 50 validation tosses: fewer are too noisy to rank checkpoints.
                  "training": dict(steps=40_000, batch_size=4, lr=1e-3, lr_final=3e-5, unroll_steps=3,
                                   unroll_after=5000, valid_every=2000, valid_trajectories=50)},
+    # The paper's model size (latent 128, 10 message-passing steps, mesh-mesh edges), for comparison.
     "paper": {"simulator": dict(latent_size=128, message_passing_steps=10, mesh_edges=True),
               "training": dict(batch_size=8)},
 }
@@ -192,16 +200,13 @@ class WindowSampler:
     approach windows a model learns that a pusher within the collision radius always moves the
     object, and starts it too early; without the settling windows, that a slowly sliding object
     keeps sliding (a rollout's small excess velocity after a glancing push then never dies out).
-    A window whose supervised step starts an object from rest weighs ``start_weight`` times its
-    acceleration weight: in quasi-static pushing that one step sets the whole velocity and spin,
-    which later steps only continue.
     """
 
     def __init__(self, trajs: list[Trajectory], scenes: list[Scene], history: int,
                  still_weight: float, seed: int, accel_cap: float = 10.0, unroll: int = 0,
-                 near: int = 0, near_weight: float = 1.0, start_weight: float = 1.0) -> None:
+                 near: int = 0, near_weight: float = 1.0) -> None:
         self.trajs, self.scenes, self.span = trajs, scenes, history + 2 + unroll
-        index, weight, accel, start = [], [], [], []
+        index, weight, accel = [], [], []
         for i, (traj, scene) in enumerate(zip(trajs, scenes, strict=True)):
             poses = traj.poses
             dyn = scene.dynamic_mask.numpy()
@@ -212,7 +217,6 @@ class WindowSampler:
                 # The target acceleration of window t is at pose t + span - 2 (index into acc).
                 accel.append(float(acc[t + self.span - 3]))
                 end = t + self.span - 1
-                start.append(bool(moved[end - 1] and not moved[end - 2]))
                 if moved[t:end].any():
                     weight.append(-1.0)
                 else:
@@ -225,7 +229,6 @@ class WindowSampler:
         moving = w < 0
         a_ref = float(np.median(a[moving])) if moving.any() else 1.0
         w[moving] = 1.0 + np.minimum(a[moving] / max(a_ref, 1e-12), accel_cap)
-        w[np.asarray(start)] *= start_weight
         self.prob = w / w.sum()
         self.rng = np.random.default_rng(seed)
 
@@ -243,46 +246,22 @@ def rotate_about_z(poses: Tensor, angle: float) -> Tensor:
     return torch.cat((poses[..., :3] @ rot.T, quat_mul(qz.expand_as(poses[..., 3:]), poses[..., 3:])), -1)
 
 
-def rigid_terms(scene: Scene, pos: Tensor, acc: Tensor) -> tuple[Tensor, Tensor]:
-    """Per-object linear and rotational parts of node accelerations ``float[N, 3]`` at node
-    positions ``pos float[N, 3]``.
-
-    The rotational part is ``r_rms * sum_i r_i x a_i / sum_i |r_i|^2`` (``r`` from the object's
-    node centroid): an angular acceleration expressed as the tangential acceleration at the
-    object's RMS radius, so it has the units (and scale) of node accelerations. Both terms are
-    linear in ``acc``, so cheap and differentiable; a loss on them isolates the rotation that a
-    plain per-node MSE lets translation and noise drown (the yaw of a pushed object).
-    Returns ``(float[O, 3], float[O, 3])``.
-    """
-    o, seg = scene.num_objects, scene.node_object
-    count, r, lin, torque = rigid_moments(acc, pos, seg, o)
-    r2 = segment_sum((r * r).sum(-1), seg, o).clamp_min(1e-12)
-    return lin, torque / r2[:, None] * (r2 / count).sqrt()[:, None]
-
-
 # ----------------------------------------------------------------------------- trainer
-# First of the 4 base face columns whose normaliser statistics a newly added optional group
-# starts from (same scale): d_rs for the next-step and ballistic separations, the receiver's
-# farthest span (about an object radius) for the lever arm.
-_STATS_FROM = {"next_separation": 0, "contact_lever": 24, "ballistic_separation": 0}
-
-
 def _face_columns(config: SimulatorConfig) -> list[tuple[str, int]]:
     """Face-feature columns of ``config`` as ``(group, index within group)``, in layout order."""
     cols = [("base", i) for i in range(FACE_BASE)]
-    for name in FACE_EXTRAS:
-        if getattr(config, name):
-            cols += [(name, i) for i in range(4)]
+    for group in config.face_groups:
+        cols += [(group.name, i) for i in range(group.size)]
     return cols
 
 
 def warm_start(sim: LearnedSimulator, source: LearnedSimulator) -> None:
     """Copy ``source``'s weights and normaliser statistics into ``sim``.
 
-    The architectures must match, except that ``sim`` may add optional face features
-    (``graph.FACE_EXTRAS``): the face encoder's input columns for a new group
-    start at zero, so the warm-started model computes exactly what ``source`` did, and the new
-    columns' normaliser statistics start as those of base columns of the same scale.
+    The architectures must match, except that ``sim`` may add optional face feature groups
+    (``graph.FACE_GROUPS``): the face encoder's input columns for a new group start at zero, so
+    the warm-started model computes exactly what ``source`` did, and the new columns' normaliser
+    statistics start as those of the group's ``stats_from`` base columns (of the same scale).
     """
     own, src = sim.state_dict(), source.state_dict()
     if set(own) != set(src):
@@ -292,7 +271,8 @@ def warm_start(sim: LearnedSimulator, source: LearnedSimulator) -> None:
         raise ValueError("cannot warm-start: the source has face features this model lacks")
     # For each of this model's face columns: the source column it copies, or (for a new group)
     # the source column its statistics start from, with its weights zeroed.
-    pick = [old_cols.index(c) if c in old_cols else _STATS_FROM[c[0]] + c[1] for c in new_cols]
+    stats_from = {g.name: g.stats_from for g in FACE_GROUPS}
+    pick = [old_cols.index(c) if c in old_cols else stats_from[c[0]] + c[1] for c in new_cols]
     fresh = torch.tensor([c not in old_cols for c in new_cols])
     widen = {"net.enc.face.first.weight", "norms.face.total", "norms.face.total_sq"}
     for key, value in src.items():
@@ -348,59 +328,21 @@ class Trainer:
         if cfg.threads:
             torch.set_num_threads(cfg.threads)
         torch.manual_seed(cfg.seed)  # the same initial weights in every process
-        dts = {round(t.dt, 9) for t in train + valid}
-        if len(dts) != 1:
-            raise ValueError(f"training and validation data mix step lengths {sorted(dts)}")
         self.train, self.valid = train, valid
-        last = out / "last.pt"
-        if resume and last.is_file():
-            blob = torch.load(last, map_location="cpu", weights_only=True)
-            config = SimulatorConfig.from_dict(blob["config"])
-        else:
-            if resume:
-                print(f"--resume: no {last}, starting a new run")
-            config = SimulatorConfig.from_dict({**sim_cfg, "dt": dts.pop()})
-            blob = None
-        mesh_opts = config.mesh_options
-        from fignet_gym.data.format import build_scene
-
-        self.train_scenes = [build_scene(t, mesh_opts) for t in train]
-        self.valid_scenes = [build_scene(t, mesh_opts) for t in valid]
+        config, blob = self._config(sim_cfg, resume)
+        self.train_scenes = [build_scene(t, config.mesh_options) for t in train]
+        self.valid_scenes = [build_scene(t, config.mesh_options) for t in valid]
         if config.noise_std <= 0 and cfg.noise_fraction > 0:
             scale = median_node_acceleration(train, self.train_scenes)
             config = replace(config, noise_std=cfg.noise_fraction * scale)
-        self.sim = LearnedSimulator(config).to(self.device)
-        self.opt = torch.optim.Adam(self.sim.parameters(), lr=cfg.lr)
-        gamma = (cfg.lr_final / cfg.lr) ** (1.0 / max(cfg.steps, 1))
-        self.sched = torch.optim.lr_scheduler.ExponentialLR(self.opt, gamma)
-        self.state = TrainState()
-        # Each process draws different windows and noise.
-        seed = cfg.seed + 1000 * self.rank
-        self.sampler = WindowSampler(train, self.train_scenes, config.history, cfg.still_weight, seed,
-                                     unroll=cfg.unroll_steps, near=cfg.near_motion_poses,
-                                     near_weight=cfg.near_motion_weight, start_weight=cfg.start_weight)
-        self.gen = torch.Generator(device=self.device).manual_seed(seed)
+        self._build(config)
         if init is not None and blob is None:
             # Fine-tuning: weights and normaliser statistics from another run, this run's recipe.
             warm_start(self.sim, load_checkpoint(init))
             print(f"initialised from {init}")
         self.ema = copy.deepcopy(self.sim).requires_grad_(False) if cfg.ema_decay > 0 else None
         if blob is not None:
-            self.sim.load_state_dict(self.sim.upgrade_state_dict(blob["state_dict"]))
-            if self.ema is not None:
-                ema = blob["meta"].get("ema", blob["state_dict"])
-                self.ema.load_state_dict(self.sim.upgrade_state_dict(ema))
-            try:
-                self.opt.load_state_dict(blob["meta"]["optimizer"])
-            except ValueError as exc:
-                raise ValueError(f"{last}: optimiser state from an older layout; start a new run with "
-                                 f"--init {last} instead of --resume ({exc})") from exc
-            self.sched.load_state_dict(blob["meta"]["scheduler"])
-            self.state = TrainState(**blob["meta"]["train_state"])
-            if self.rank == 0:  # other processes continue with fresh draws
-                self.sampler.rng.bit_generator.state = json.loads(blob["meta"]["sampler_rng"])
-                self.gen.set_state(blob["meta"]["noise_rng"])
-            print(f"resumed from {last} at step {self.state.step}")
+            self._resume(blob)
         self._broadcast(self.sim.state_dict().values())
         if self.ema is not None:
             self._broadcast(self.ema.state_dict().values())
@@ -408,6 +350,53 @@ class Trainer:
             (out / "config.json").write_text(json.dumps(
                 {"simulator": config.to_dict(), "training": asdict(cfg), "processes": self.world},
                 indent=2))
+
+    def _config(self, sim_cfg: dict[str, Any], resume: bool) -> tuple[SimulatorConfig, dict[str, Any] | None]:
+        """The model's config, and with ``resume`` the ``last.pt`` blob it comes from (if any)."""
+        dts = {round(t.dt, 9) for t in self.train + self.valid}
+        if len(dts) != 1:
+            raise ValueError(f"training and validation data mix step lengths {sorted(dts)}")
+        last = self.out / "last.pt"
+        if resume and last.is_file():
+            blob = torch.load(last, map_location="cpu", weights_only=True)
+            return SimulatorConfig.from_dict(blob["config"]), blob
+        if resume:
+            print(f"--resume: no {last}, starting a new run")
+        return SimulatorConfig.from_dict({**sim_cfg, "dt": dts.pop()}), None
+
+    def _build(self, config: SimulatorConfig) -> None:
+        """A fresh model, its optimiser and schedule, the window sampler and the noise source."""
+        cfg = self.cfg
+        self.sim = LearnedSimulator(config).to(self.device)
+        self.opt = torch.optim.Adam(self.sim.parameters(), lr=cfg.lr)
+        gamma = (cfg.lr_final / cfg.lr) ** (1.0 / max(cfg.steps, 1))
+        self.sched = torch.optim.lr_scheduler.ExponentialLR(self.opt, gamma)
+        self.state = TrainState()
+        seed = cfg.seed + 1000 * self.rank  # each process draws different windows and noise
+        self.sampler = WindowSampler(self.train, self.train_scenes, config.history, cfg.still_weight, seed,
+                                     unroll=cfg.unroll_steps, near=cfg.near_motion_poses,
+                                     near_weight=cfg.near_motion_weight)
+        self.gen = torch.Generator(device=self.device).manual_seed(seed)
+
+    def _resume(self, blob: dict[str, Any]) -> None:
+        """Restore weights (and their average), optimiser, schedule, progress and random streams
+        from the ``last.pt`` blob."""
+        last = self.out / "last.pt"
+        meta = blob["meta"]
+        self.sim.load_state_dict(self.sim.upgrade_state_dict(blob["state_dict"]))
+        if self.ema is not None:
+            self.ema.load_state_dict(self.sim.upgrade_state_dict(meta.get("ema", blob["state_dict"])))
+        try:
+            self.opt.load_state_dict(meta["optimizer"])
+        except ValueError as exc:
+            raise ValueError(f"{last}: optimiser state from an older layout; start a new run with "
+                             f"--init {last} instead of --resume ({exc})") from exc
+        self.sched.load_state_dict(meta["scheduler"])
+        self.state = TrainState(**meta["train_state"])
+        if self.rank == 0:  # other processes continue with fresh draws
+            self.sampler.rng.bit_generator.state = json.loads(meta["sampler_rng"])
+            self.gen.set_state(meta["noise_rng"])
+        print(f"resumed from {last} at step {self.state.step}")
 
     # -------------------------------------------------------------- data parallelism
     def _broadcast(self, tensors: Any) -> None:
@@ -476,28 +465,11 @@ class Trainer:
         return poses[k:], hist
 
     def loss(self, scene: Scene, poses: Tensor) -> Tensor:
-        """Node acceleration loss plus the per-object rigid terms, normalised by target scale.
-
-        ``poses float[H + 1 + unroll_steps, O, 7]``: a window from :meth:`batch`.
-        """
-        sim = self.sim
+        """The simulator's loss (:meth:`LearnedSimulator.loss`) on a window from :meth:`batch`
+        (``poses float[H + 1 + unroll_steps, O, 7]``), after pushforward if configured."""
         poses, inputs = self.pushforward(scene, poses)
-        graph, target, weight = sim.training_example(scene, poses, self.gen, inputs)
-        base, pred_n = sim.loss(graph, target, weight)
-        if self.cfg.rigid_loss_weight <= 0:
-            return base
-        norm = sim.target_norm
-        # One isotropic scale (not per axis) keeps cross products meaningful.
-        scale = norm.std.mean().to(pred_n.dtype)
-        pred = norm.inverse(pred_n) / scale
-        pos = scene.node_positions(poses[-2])
-        lin_p, ang_p = rigid_terms(scene, pos, pred)
-        lin_t, ang_t = rigid_terms(scene, pos, target / scale)
-        # The objects the node loss supervises (dynamic ones; with free_flight, those in contact).
-        live = segment_sum(weight, scene.node_object, scene.num_objects) > 0
-        n = live.sum().clamp_min(1)  # a batch may have no object in contact
-        rigid = ((lin_p - lin_t)[live].pow(2).sum() + (ang_p - ang_t)[live].pow(2).sum()) / (3 * n)
-        return base + self.cfg.rigid_loss_weight * rigid
+        example = self.sim.training_example(scene, poses, self.gen, inputs)
+        return self.sim.loss(example, self.cfg.rigid_loss_weight)
 
     # -------------------------------------------------------------- loop
     def run(self, stop_after: int | None = None) -> TrainState:
