@@ -7,11 +7,14 @@ agree exactly, not to a tolerance. Truth here is the unbatched computation itsel
 
 from __future__ import annotations
 
+import contextlib
+
 import gymnasium as gym
 import mujoco
 import numpy as np
 import pytest
 import torch
+from torch.utils._python_dispatch import TorchDispatchMode
 
 import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.dynamics import STATE_SPEC, FIGNetDynamics
@@ -143,3 +146,91 @@ def test_vector_env_with_shipped_model_reproduces_single_envs(env_id: str, steps
         ref = [e.step(act[i])[0] for i, e in enumerate(singles)]
         np.testing.assert_array_equal(obs, np.stack(ref))
     venv.close()
+
+
+class _HostGuard(TorchDispatchMode):
+    """Fails on any op that copies a tensor across devices and counts scalar host syncs
+    (``bool``/``int`` of a tensor), while :func:`_no_host_transfers` also blocks ``.cpu()``,
+    ``.numpy()`` and ``.tolist()``: on a CUDA machine these are the transfers that stall a
+    rollout; on this CPU-only one the guard sees the same calls."""
+
+    syncs = 0
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):  # noqa: ANN001, ANN204
+        kwargs = kwargs or {}
+        if func is torch.ops.aten._local_scalar_dense.default:
+            _HostGuard.syncs += 1
+        out = func(*args, **kwargs)
+        if func in (torch.ops.aten._to_copy.default, torch.ops.aten.copy_.default):
+            src = args[1] if func is torch.ops.aten.copy_.default else args[0]
+            dst = out if isinstance(out, torch.Tensor) else args[0]
+            assert src.device == dst.device, f"{func}: {src.device} -> {dst.device}"
+        return out
+
+
+@contextlib.contextmanager
+def _no_host_transfers(monkeypatch: pytest.MonkeyPatch):  # noqa: ANN202
+    def refuse(name: str):  # noqa: ANN202
+        def f(self, *a, **k):  # noqa: ANN001, ANN002, ANN003, ANN202
+            raise AssertionError(f"Tensor.{name}() inside a rollout step")
+        return f
+
+    with monkeypatch.context() as m:
+        for name in ("cpu", "numpy", "tolist", "item"):
+            m.setattr(torch.Tensor, name, refuse(name))
+        with _HostGuard():
+            yield
+
+
+def test_rollout_steps_move_no_tensor_to_the_host(push_sim, monkeypatch) -> None:  # noqa: ANN001
+    """The GPU path (CUDA is not available here to run it): a learned rollout step, in the
+    simulator and inside ``FIGNetDynamics.rollout``, moves no tensor to the host; only a few
+    scalar syncs for control flow remain, and their number does not grow with the batch."""
+    model = mujoco.MjModel.from_xml_string(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
+    scene = Scene.from_mjmodel(model, push_sim.config.mesh_options)
+    hist = _push_history(scene, 0.0)
+    syncs = {}
+    for b in (1, 8):
+        h = hist.repeat(1, b, 1)
+        kin = h[-1][None].repeat(5, 1, 1)
+        _HostGuard.syncs = 0
+        with _no_host_transfers(monkeypatch):
+            push_sim.rollout(scene.repeat(b), h, kin)
+        syncs[b] = _HostGuard.syncs
+    assert syncs[1] == syncs[8] <= 5 * 5, syncs  # 5 per step measured
+
+    dyn = FIGNetDynamics(push_sim)
+    advance = dyn._advance
+
+    def guarded(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        with _no_host_transfers(monkeypatch):
+            return advance(*args, **kwargs)
+
+    monkeypatch.setattr(dyn, "_advance", guarded)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    init = np.empty((2, mujoco.mj_stateSize(model, STATE_SPEC)))
+    for i in range(2):
+        mujoco.mj_getState(model, data, init[i], STATE_SPEC)
+    control = np.tile(np.r_[data.mocap_pos[0] + [0.01, 0, 0], 1, 0, 0, 0], (2, 5, 1))
+    assert np.isfinite(dyn.rollout(model, init, control, frame_skip=10)).all()
+
+
+@pytest.mark.parametrize("batch", [1, 2])
+def test_analytic_flops_match_torch_flop_counter(push_sim, batch: int) -> None:  # noqa: ANN001
+    """``network_flops`` (the bench's analytic count, block by block) equals what torch's own
+    FLOP counter sees the network execute, on a mixed batch that takes both first-layer routes."""
+    from torch.utils.flop_counter import FlopCounterMode
+
+    from fignet_gym.tools.bench_limits import network_flops
+
+    model = mujoco.MjModel.from_xml_string(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
+    scene = Scene.from_mjmodel(model, push_sim.config.mesh_options)
+    states = (_push_history(scene, 0.0), _push_history(scene, 0.5))
+    hist = torch.cat(states[:batch], dim=1)
+    flops, _ = network_flops(push_sim, scene.repeat(batch), hist)
+    graph = push_sim.build_inputs(scene.repeat(batch), hist, hist[-1]).graph
+    counter = FlopCounterMode(display=False)
+    with counter, torch.no_grad():
+        push_sim.net(push_sim.normalize(graph))
+    assert sum(flops.values()) == counter.get_total_flops()

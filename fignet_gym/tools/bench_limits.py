@@ -25,7 +25,7 @@ from torch import nn
 
 from fignet_gym.dynamics import STATE_SPEC, FIGNetDynamics, MujocoDynamics
 from fignet_gym.simulator.model import LearnedSimulator
-from fignet_gym.simulator.networks import MLP, EdgeIndex, EncodeProcessDecode
+from fignet_gym.simulator.networks import MIN_ROWS, MLP, EdgeIndex, EncodeProcessDecode
 from fignet_gym.simulator.scene import Scene
 
 Shape = tuple[int, int, int]  # (rows, in, out) of one matmul
@@ -99,6 +99,8 @@ def network_flops(sim: LearnedSimulator, scene: Scene, history: torch.Tensor
         shapes += list(_mlp_shapes(blk.mesh_node, n))
         blocks[f"block {i}"] = shapes
     blocks["decoder"] = list(_mlp_shapes(net.decoder, n))
+    # Products narrower than MIN_ROWS run padded (networks.linear): count what is executed.
+    blocks = {k: [(max(r, MIN_ROWS) if r > 0 else 0, a, b) for r, a, b in v] for k, v in blocks.items()}
     flops = {k: float(sum(2 * r * a * b for r, a, b in v)) for k, v in blocks.items()}
     return flops, [s for v in blocks.values() for s in v if s[0] > 0]
 
