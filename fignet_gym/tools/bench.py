@@ -194,7 +194,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "machine's matmul rate on the same shapes (skips the untrained configs)")
     p.add_argument("--rollout", action="store_true",
                    help="scene-steps/s of Dynamics.rollout (learned vs mujoco.rollout) at "
-                        "--rollout-batch over --rollout-steps steps, and CEM seconds per action")
+                        "--rollout-batch over --rollout-steps steps")
     p.add_argument("--rollout-batch", type=int, nargs="*", default=[1, 64, 256, 1024])
     p.add_argument("--rollout-steps", type=int, default=25)
     p.add_argument("--json", metavar="PATH", help="write every figure to this JSON file")
@@ -239,8 +239,8 @@ def shipped_table(args: argparse.Namespace, dtype: torch.dtype, scenes: list[Ben
 
 
 def rollout_table(args: argparse.Namespace, scenes: list[BenchScene]) -> dict[str, Any]:
-    """Dynamics.rollout throughput of the shipped models against mujoco.rollout, and the planner."""
-    from fignet_gym.tools.bench_limits import planner_seconds_per_action, time_rollouts
+    """Dynamics.rollout throughput of the shipped models against mujoco.rollout."""
+    from fignet_gym.tools.bench_limits import time_rollouts
 
     out: dict[str, Any] = {}
     for b in scenes:
@@ -256,12 +256,6 @@ def rollout_table(args: argparse.Namespace, scenes: list[BenchScene]) -> dict[st
         for r in rows:
             print(f"{r['batch']:5d} " + " ".join(f"{r[k]['scene_steps_per_s']:18.0f}" for k in keys)
                   + f" {r['learned']['seconds']:10.2f}")
-    try:
-        out["planner_seconds_per_action"] = planner_seconds_per_action()
-        print(f"\nCEMPlanner (default settings) CPU s per action on Push-v0: "
-              f"{out['planner_seconds_per_action']}")
-    except Exception as exc:  # noqa: BLE001 - the planner is optional here, report and go on
-        print(f"\nplanner not timed: {exc}")
     return out
 
 

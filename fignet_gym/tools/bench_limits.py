@@ -172,27 +172,3 @@ def time_rollouts(model: mujoco.MjModel, data: mujoco.MjData, substeps: int,
                          "finite": bool(np.isfinite(res).all())}
         out.append(row)
     return out
-
-
-def planner_seconds_per_action(actions: int = 3) -> dict[str, float]:
-    """CPU seconds per ``CEMPlanner.plan`` at its default settings on Push-v0 (learned and MuJoCo
-    dynamics), the median over ``actions`` consecutive actions after one warm-up action."""
-    import gymnasium as gym
-
-    from fignet_gym.agents.planners import CEMPlanner
-
-    out = {}
-    for name, dyn in (("learned", FIGNetDynamics("push")), ("mujoco_1thread", MujocoDynamics(nthread=1))):
-        env = gym.make("fignet_gym/Push-v0")
-        env.reset(seed=0)
-        planner = CEMPlanner(dyn, env=env)
-        times = []
-        for k in range(actions + 1):
-            t0 = time.process_time()
-            act = planner.plan(env)
-            if k:
-                times.append(time.process_time() - t0)
-            env.step(act)
-        out[name] = statistics.median(times)
-        env.close()
-    return out
