@@ -76,6 +76,7 @@ class MjDynamicsEnv(gym.Env[np.ndarray, np.ndarray]):
     def _init_state(self) -> None:
         """Per-instance state: ``MjData``, renderer, random generator (also for :meth:`_spawn`)."""
         self.data = mujoco.MjData(self.model)
+        self._was_reset = False  # stepping a never-reset environment would use unsampled task state
         self._renderer: mujoco.Renderer | None = None
         self._np_random = None
         self._np_random_seed = None
@@ -112,10 +113,12 @@ class MjDynamicsEnv(gym.Env[np.ndarray, np.ndarray]):
         mujoco.mj_resetData(self.model, self.data)
         self._reset_task(self.np_random, options)
         mujoco.mj_forward(self.model, self.data)
+        self._was_reset = True
         return self._observe(), {}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """One environment step (``nstep`` MuJoCo timesteps of ``dynamics``)."""
+        self._check_was_reset()
         act = self._pre_step(action)
         reason = None
         try:
@@ -125,10 +128,28 @@ class MjDynamicsEnv(gym.Env[np.ndarray, np.ndarray]):
         return self._post_step(act, reason)
 
     def _pre_step(self, action: Any) -> np.ndarray:
-        """Validate (``ValueError`` for a wrong shape or a NaN/inf), clip and apply the action."""
-        act = check_action(type(self).__name__, action, self.action_space)
+        """Validate (:meth:`_check_step`), clip and apply the action."""
+        act = self._check_step(action)
         self._apply_action(act)
         return act
+
+    def _check_step(self, action: Any) -> np.ndarray:
+        """The clipped action ``float64[A]`` if this environment may step with it, changing
+        nothing: ``ValueError`` for a wrong shape or a NaN/inf, ``RuntimeError`` when
+        :meth:`_check_ready` refuses. The vector environment checks every row this way before
+        applying any, so a rejected batch changes no state."""
+        act = check_action(type(self).__name__, action, self.action_space)
+        self._check_ready()
+        return act
+
+    def _check_was_reset(self) -> None:
+        """``RuntimeError`` if ``step`` comes before the first ``reset`` (whose task state, goal
+        or target, the step would otherwise silently use unsampled)."""
+        if not self._was_reset:
+            raise RuntimeError(f"{type(self).__name__}: call reset() before step()")
+
+    def _check_ready(self) -> None:
+        """Raise ``RuntimeError`` if the episode cannot take another step (subclass hook)."""
 
     def _post_step(
         self, action: np.ndarray, diverged: str | None
@@ -179,6 +200,43 @@ def check_action(owner: str, action: Any, space: gym.spaces.Box) -> np.ndarray:
     if not np.isfinite(act).all():
         raise ValueError(f"{owner}: action {act.tolist()} contains NaN or infinite values")
     return np.clip(act, space.low, space.high)
+
+
+def check_arguments(owner: str, **checks: tuple[Any, str]) -> None:
+    """Validate constructor arguments, ``ValueError`` naming the first bad one.
+
+    Each keyword is ``name=(value, rule)``; rules: ``"positive"`` / ``"nonnegative"`` /
+    ``"finite"`` (a real number), ``"count"`` (an integer >= 1), ``"vector<n>"`` (``n`` finite
+    numbers); a trailing ``"?"`` also allows ``None``.
+    """
+    for name, (value, rule) in checks.items():
+        if rule.endswith("?"):
+            if value is None:
+                continue
+            rule = rule[:-1]
+        if rule == "count":
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(f"{owner}: {name} must be an integer >= 1, got {value!r}")
+            continue
+        if rule.startswith("vector"):
+            n = int(rule[6:])
+            try:
+                arr = np.asarray(value, dtype=np.float64)
+            except (TypeError, ValueError):
+                arr = np.zeros(0)
+            if arr.shape != (n,) or not np.isfinite(arr).all():
+                raise ValueError(f"{owner}: {name} must be {n} finite numbers, got {value!r}")
+            continue
+        ok = not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
+        ok = ok and bool(np.isfinite(value))
+        if ok and rule == "positive":
+            ok = value > 0
+        elif ok and rule == "nonnegative":
+            ok = value >= 0
+        if not ok:
+            what = {"positive": "a finite number > 0", "nonnegative": "a finite number >= 0",
+                    "finite": "a finite number"}[rule]
+            raise ValueError(f"{owner}: {name} must be {what}, got {value!r}")
 
 
 def yaw_of(quat: np.ndarray) -> np.ndarray:

@@ -10,7 +10,14 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 
 from fignet_gym.dynamics import Dynamics
-from fignet_gym.envs.base import MjDynamicsEnv, layout, layout_size, wrap_angle, yaw_of
+from fignet_gym.envs.base import (
+    MjDynamicsEnv,
+    check_arguments,
+    layout,
+    layout_size,
+    wrap_angle,
+    yaw_of,
+)
 from fignet_gym.envs.vector import BatchedVectorEnv
 from fignet_gym.mjcf import push_object, push_scene_xml
 
@@ -131,6 +138,14 @@ class PushEnv(MjDynamicsEnv):
         height: int = 480,
         dynamics_kwargs: dict[str, Any] | None = None,
     ) -> None:
+        check_arguments(
+            "PushEnv", friction=(friction, "positive"), tip_friction=(tip_friction, "positive?"),
+            max_speed=(max_speed, "positive"), frame_skip=(frame_skip, "count"),
+            goal_distance=(goal_distance, "nonnegative"), goal_yaw=(goal_yaw, "nonnegative"),
+            position_weight=(position_weight, "finite"), orientation_weight=(orientation_weight, "finite"),
+            action_weight=(action_weight, "finite"), success_position=(success_position, "positive"),
+            success_yaw=(success_yaw, "positive"), workspace=(workspace, "positive"),
+            width=(width, "count"), height=(height, "count"))
         obj = push_object(shape)
         model = mujoco.MjModel.from_xml_string(
             push_scene_xml(shape, friction=friction, tip_friction=tip_friction)

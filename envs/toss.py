@@ -11,7 +11,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 
 from fignet_gym.dynamics import Dynamics
-from fignet_gym.envs.base import MjDynamicsEnv, add_disc, layout, layout_size
+from fignet_gym.envs.base import MjDynamicsEnv, add_disc, check_arguments, layout, layout_size
 from fignet_gym.envs.vector import BatchedVectorEnv
 from fignet_gym.mjcf import TossObject, toss_scene_xml, unit_shape_mesh
 
@@ -142,12 +142,21 @@ class TossEnv(MjDynamicsEnv):
         height: int = 480,
         dynamics_kwargs: dict[str, Any] | None = None,
     ) -> None:
+        check_arguments(
+            "TossEnv", floor_half_size=(floor_half_size, "positive"), frame_skip=(frame_skip, "count"),
+            settle_steps=(settle_steps, "count"), release_position=(release_position, "vector3"),
+            release_velocity_low=(release_velocity_low, "vector2"),
+            release_velocity_high=(release_velocity_high, "vector2"),
+            target_low=(target_low, "vector2"), target_high=(target_high, "vector2"),
+            target_radius=(target_radius, "positive"), distance_weight=(distance_weight, "finite"),
+            in_target_weight=(in_target_weight, "finite"), width=(width, "count"),
+            height=(height, "count"))
+        if np.any(np.asarray(target_low, float) > np.asarray(target_high, float)):
+            raise ValueError(f"TossEnv: target_low {target_low} must not exceed target_high {target_high}")
         self.objects = tuple(objects) if objects is not None else DEFAULT_OBJECTS
         k = len(self.objects)
         if k < 1:
             raise ValueError("TossEnv needs at least one object")
-        if settle_steps < 1:
-            raise ValueError(f"settle_steps must be >= 1, got {settle_steps}")
         self.settle_steps = int(settle_steps)
         self.release_position = np.asarray(release_position, dtype=np.float64)
         self.release_velocity_low = np.asarray(release_velocity_low, dtype=np.float64)
@@ -224,9 +233,12 @@ class TossEnv(MjDynamicsEnv):
         self._in_before = 0
         # qpos0 holds the parked poses (mj_resetData ran before this).
 
-    def _apply_action(self, action: np.ndarray) -> None:
+    def _check_ready(self) -> None:
         if self.released >= len(self.objects):
             raise RuntimeError(f"{type(self).__name__}: every object was tossed; call reset()")
+
+    def _apply_action(self, action: np.ndarray) -> None:
+        self._check_ready()
         k = self.released
         self._in_before = self._in_target(k)
         lo, hi = self.release_velocity_low, self.release_velocity_high

@@ -23,7 +23,12 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from fignet_gym.dynamics import DivergenceError
-from fignet_gym.envs.base import MjDynamicsEnv
+from fignet_gym.envs.base import MjDynamicsEnv, check_action
+
+
+def _is_seed(value: Any) -> bool:
+    """Whether ``value`` is a seed NumPy accepts: a non-negative integer (not a bool)."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= 0
 
 
 class BatchedVectorEnv(VectorEnv):
@@ -83,13 +88,19 @@ class BatchedVectorEnv(VectorEnv):
         """
         if seed is None:
             seeds: list[int | None] = [None] * self.num_envs
-        elif isinstance(seed, (int, np.integer)):
+        elif _is_seed(seed):
             super().reset(seed=int(seed))
             seeds = [int(seed) + i for i in range(self.num_envs)]
         else:
+            if isinstance(seed, (str, bytes)) or not isinstance(seed, Sequence | np.ndarray):
+                raise ValueError(f"{self}: seed must be a non-negative integer, a sequence of "
+                                 f"{self.num_envs} of them or None, got {seed!r}")
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"{self}: expected {self.num_envs} seeds, got {len(seeds)}")
+            bad = [s for s in seeds if s is not None and not _is_seed(s)]
+            if bad:
+                raise ValueError(f"{self}: seeds must be non-negative integers or None, got {bad[0]!r}")
         obs, infos = [], {}
         for i, (env, s) in enumerate(zip(self.envs, seeds, strict=True)):
             o, info = env.reset(seed=s, options=options)
@@ -103,8 +114,15 @@ class BatchedVectorEnv(VectorEnv):
         self, actions: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """``float[N, A]`` actions -> observations ``float32[N, D]``, rewards ``float64[N]``,
-        terminations ``bool[N]``, truncations ``bool[N]``, batched infos."""
-        acts = np.asarray(actions, dtype=np.float64)
+        terminations ``bool[N]``, truncations ``bool[N]``, batched infos.
+
+        The whole batch is checked first (``ValueError`` for a wrong shape or a NaN/inf in any
+        row, also in a row that is being reset and whose action is ignored): a refused batch
+        changes no sub-environment."""
+        try:
+            acts = np.asarray(actions, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{self}: actions are not numeric ({exc})") from None
         expected = (self.num_envs, *self.single_action_space.shape)
         if acts.shape != expected:
             raise ValueError(f"{self}: actions must have shape {expected}, got {acts.shape}")
@@ -119,9 +137,14 @@ class BatchedVectorEnv(VectorEnv):
                 f"{np.flatnonzero(self._needs_reset).tolist()} ended: reset them first"
             )
         stepping = np.flatnonzero(~resetting)
-        applied = {}
+        # Every row is checked before any is applied: a rejected batch changes no sub-environment.
         for i in stepping:
-            applied[i] = self.envs[i]._pre_step(acts[i])
+            self.envs[i]._check_was_reset()
+        applied = {i: self.envs[i]._check_step(acts[i]) for i in stepping}
+        for i in np.flatnonzero(resetting):  # ignored (the row resets), but a NaN is still a bug
+            check_action(str(self), acts[i], self.single_action_space)
+        for i in stepping:
+            self.envs[i]._apply_action(applied[i])
         reasons: dict[int, str] = {}
         try:
             self.dynamics.step_many(self.model, [self.envs[i].data for i in stepping], self.nstep)

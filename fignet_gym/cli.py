@@ -4,16 +4,69 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+
+from fignet_gym.data.cli import int_at_least, nonnegative_float
 
 
+# ----------------------------------------------------------------------------- user errors
+def user_error(err: BaseException) -> str | None:
+    """The one-line message for an error caused by the user's input, ``None`` for a bug.
+
+    Known user errors: bad or missing files (checkpoints, trajectory files, run folders,
+    unreadable paths), refused overwrites, unsupported scenes, and ``ValueError`` from argument
+    and config checks. Their messages already name the file and field.
+    """
+    from fignet_gym.data.generate import GenerationError
+
+    # CheckpointError, TrajectoryFormatError, RunFolderError and UnsupportedSceneError are
+    # ValueErrors.
+    if isinstance(err, OSError) and not isinstance(err, (FileExistsError, FileNotFoundError)):
+        name = err.filename if err.filename is not None else ""
+        return f"{name}: {err.strerror or err}" if name else str(err)
+    if isinstance(err, (ValueError, FileExistsError, FileNotFoundError, GenerationError)):
+        return str(err)
+    return None
+
+
+def run_command(func: Callable[[argparse.Namespace], int | None], args: argparse.Namespace) -> int:
+    """Run a subcommand: a user error prints ``error: <file>: <what>`` and returns 2 (set
+    ``FIGNET_GYM_TRACEBACK=1`` for the traceback); anything else (a bug) propagates."""
+    try:
+        return int(func(args) or 0)
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
+    except Exception as err:  # noqa: BLE001 - classified below, re-raised if not a user error
+        msg = user_error(err)
+        if msg is None or os.environ.get("FIGNET_GYM_TRACEBACK"):
+            raise
+        print(f"error: {msg}", file=sys.stderr)
+        return 2
+
+
+def _overrides(text: str | None) -> dict:
+    if not text:
+        return {}
+    try:
+        value = json.loads(text)
+    except ValueError as exc:
+        raise ValueError(f"--set: not JSON ({exc}): {text!r}") from None
+    if not isinstance(value, dict):
+        raise ValueError(f'--set: expected a JSON object such as \'{{"training.steps": 500}}\', got {text!r}')
+    return value
+
+
+# ----------------------------------------------------------------------------- commands
 def _train(args: argparse.Namespace) -> int:
     from fignet_gym.train.training import train_from_files
 
-    overrides = dict(json.loads(args.set)) if args.set else {}
+    overrides = _overrides(args.set)
     train_from_files(args.data, args.valid, args.config, args.out, resume=args.resume,
-                     overrides=overrides, max_train=args.max_train, init=args.init)
+                     overrides=overrides, max_train=args.max_train, init=args.init,
+                     force=args.force)
     return 0
 
 
@@ -79,8 +132,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="preset name (push-cpu, push-finetune, push-scratch, toss-cpu, paper) or JSON file")
     t.add_argument("--set", help='JSON overrides, e.g. \'{"training.steps": 500}\'')
     t.add_argument("--out", required=True, help="run folder (checkpoints, logs)")
-    t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
-    t.add_argument("--max-train", type=int, help="use only the first N training trajectories")
+    t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt (the run's "
+                   "own config unless --config is given, which must then match it)")
+    t.add_argument("--force", action="store_true", help="replace a run already in OUT")
+    t.add_argument("--max-train", type=int_at_least(1),
+                   help="use only the first N training trajectories")
     t.add_argument("--init", help="start from this checkpoint's weights (fine-tuning a new run)")
     t.set_defaults(func=_train)
 
@@ -88,9 +144,10 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--checkpoint", required=True, help="checkpoint file or pretrained name")
     e.add_argument("--data", required=True, help="held-out trajectories (HDF5)")
     e.add_argument("--out", default="outputs/eval", help="folder for metrics.json, plots, videos")
-    e.add_argument("--num", type=int, default=32, help="trajectories to evaluate")
-    e.add_argument("--horizon", type=int, default=50, help="step at which errors are reported")
-    e.add_argument("--videos", type=int, default=2, help="side-by-side videos to write")
+    e.add_argument("--num", type=int_at_least(1), default=32, help="trajectories to evaluate")
+    e.add_argument("--horizon", type=int_at_least(1), default=50,
+                   help="step at which errors are reported")
+    e.add_argument("--videos", type=int_at_least(0), default=2, help="side-by-side videos to write")
     e.add_argument("--against", help="second checkpoint (e.g. a baseline) on the same trajectories: "
                    "ratio of median errors with a bootstrap interval")
     e.set_defaults(func=_evaluate)
@@ -98,11 +155,13 @@ def build_parser() -> argparse.ArgumentParser:
     f = sub.add_parser("floor", help="MuJoCo's own rollout error from a slightly wrong start "
                        "(how chaotic the data is: a floor under learned rollouts)")
     f.add_argument("--data", required=True, help="generated trajectories (HDF5)")
-    f.add_argument("--noise", type=float, nargs="+", default=[1e-4, 1e-3, 1e-2],
+    f.add_argument("--noise", type=nonnegative_float, nargs="+", default=[1e-4, 1e-3, 1e-2],
                    help="start position errors (m): every free body moved horizontally")
-    f.add_argument("--num", type=int, default=32, help="trajectories to re-simulate")
-    f.add_argument("--horizon", type=int, default=50, help="step at which errors are reported")
-    f.add_argument("--history", type=int, default=2, help="velocities a learned rollout is given "
+    f.add_argument("--num", type=int_at_least(1), default=32, help="trajectories to re-simulate")
+    f.add_argument("--horizon", type=int_at_least(1), default=50,
+                   help="step at which errors are reported")
+    f.add_argument("--history", type=int_at_least(1), default=2,
+                   help="velocities a learned rollout is given "
                    "(the nudge is at the last of its history + 1 poses)")
     f.add_argument("--out", help="JSON file for the table")
     f.set_defaults(func=_floor)
@@ -111,8 +170,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--run", required=True, help="run folder (with best.pt, curve.jsonl)")
     s.add_argument("--name", required=True, help="pretrained name, e.g. push")
     s.add_argument("--data", required=True, help="held-out trajectories for the card's scores")
-    s.add_argument("--horizon", type=int, default=50, help="step at which errors are reported")
-    s.add_argument("--num", type=int, default=64, help="held-out trajectories to evaluate")
+    s.add_argument("--horizon", type=int_at_least(1), default=50,
+                   help="step at which errors are reported")
+    s.add_argument("--num", type=int_at_least(1), default=64, help="held-out trajectories to evaluate")
     s.add_argument("--dest", help="folder (default: the package's pretrained/)")
     s.add_argument("--notes", default="", help="extra Markdown for the card")
     s.set_defaults(func=_ship)
@@ -124,7 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``fignet-gym`` script."""
     args = build_parser().parse_args(argv)
-    return int(args.func(args) or 0)
+    return run_command(args.func, args)
 
 
 if __name__ == "__main__":

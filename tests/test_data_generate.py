@@ -156,12 +156,16 @@ def test_cli_generate_file_metadata_and_bad_kind(tmp_path: Path, capsys) -> None
     with TrajectoryFile(fine) as f:
         assert f[1].dt == pytest.approx(0.01) and f[1].num_steps == 11
         np.testing.assert_allclose(f[1].poses[::2], coarse, atol=1e-12)
-    assert _run_cli("generate", "push", "--num", "1", "--out", str(fine), "--substeps", "0",
-                    "--no-progress") == 1
-    assert "--substeps must be at least 1" in capsys.readouterr().err
-    assert _run_cli("generate", "push", "--num", "1", "--seed", "-1", "--out", str(out),
-                    "--workers", "1", "--no-progress") == 1
-    assert "seed must be non-negative" in capsys.readouterr().err
+    # Out-of-range values are refused by the parser (usage error: exit 2), before any work.
+    with pytest.raises(SystemExit) as info:
+        _run_cli("generate", "push", "--num", "1", "--out", str(fine), "--substeps", "0",
+                 "--no-progress")
+    assert info.value.code == 2
+    assert "argument --substeps: must be an integer >= 1" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        _run_cli("generate", "push", "--num", "1", "--seed", "-1", "--out", str(out),
+                 "--workers", "1", "--no-progress")
+    assert "argument --seed: must be an integer >= 0" in capsys.readouterr().err
     with pytest.raises(ValueError, match="valid: push, toss-simple, toss-complex"):
         gen.default_config("toss")
 

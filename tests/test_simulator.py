@@ -174,6 +174,7 @@ def test_checkpoint_roundtrip_and_bad_files(tmp_path, push_like_xml: str) -> Non
     mismatched = tmp_path / "mismatch.pt"
     blob = torch.load(path, weights_only=True)
     blob["config"]["latent_size"] = 32
+    del blob["checksum"]  # an unsealed file: the shape check (not the checksum) must refuse it
     torch.save(blob, mismatched)
     with pytest.raises(CheckpointError, match="do not match"):
         LearnedSimulator.load(mismatched)
@@ -235,6 +236,7 @@ def test_last_block_has_no_dead_weights_and_old_checkpoints_load(tmp_path, push_
     old = tmp_path / "old.pt"
     sim.save(old)
     blob = torch.load(old, weights_only=True)
+    del blob["checksum"]  # that layout predates content checksums
     first = f"net.blocks.{last - 1}."
     for key in [k for k in blob["state_dict"] if k.startswith((first + "mesh_obj.", first + "obj_node."))]:
         blob["state_dict"][key.replace(first, f"net.blocks.{last}.")] = blob["state_dict"][key].clone()
@@ -320,6 +322,7 @@ def test_retired_config_keys_load_at_their_old_default_and_refuse_anything_else(
     path = tmp_path / "old.pt"
     sim.save(path)
     blob = torch.load(path, weights_only=True)
+    del blob["checksum"]  # an old file: written before checksums (and before the retirement)
     # A checkpoint written while the experiments existed carried them all, switched off.
     blob["config"].update(RETIRED_KEYS)
     torch.save(blob, path)

@@ -9,6 +9,7 @@ Also runnable alone: ``python -m fignet_gym.data.cli <subcommand> ...``.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from collections.abc import Callable, Sequence
@@ -16,8 +17,44 @@ from pathlib import Path
 
 from fignet_gym.data.format import TrajectoryFormatError
 
+
+def int_at_least(low: int) -> Callable[[str], int]:
+    """argparse ``type``: an integer ``>= low`` (argparse prints the message and exits 2)."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {value}")
+        return value
+    parse.__name__ = f"integer >= {low}"
+    return parse
+
+
+def positive_float(text: str) -> float:
+    """argparse ``type``: a finite number ``> 0``."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return value
+
+
+def nonnegative_float(text: str) -> float:
+    """argparse ``type``: a finite number ``>= 0``."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
+    return value
+
 _KNOWN_ERRORS: tuple[type[BaseException], ...] = (TrajectoryFormatError, FileNotFoundError,
-                                                  ValueError, IndexError)
+                                                  FileExistsError, ValueError, IndexError)
 
 
 def _guarded(fn: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
@@ -29,6 +66,22 @@ def _guarded(fn: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Name
             return 1
     run.__doc__ = fn.__doc__
     return run
+
+
+def _refuse_overwrite(out: str | os.PathLike, force: bool) -> None:
+    """``FileExistsError`` if ``out`` exists and ``force`` is not set (outputs are never silently
+    replaced); a directory is never replaced."""
+    path = Path(out)
+    if path.is_dir():
+        raise FileExistsError(f"{path}: is a directory; --out must be a file")
+    if path.exists() and not force:
+        raise FileExistsError(f"{path}: already exists; pass --force to replace it")
+
+
+def _refuse_empty(n: int, out: str | os.PathLike) -> None:
+    if n == 0:
+        Path(out).unlink(missing_ok=True)
+        raise ValueError(f"{out}: no trajectory was imported (every input was skipped); nothing written")
 
 
 def _generate(args: argparse.Namespace) -> int:
@@ -46,9 +99,8 @@ def _generate(args: argparse.Namespace) -> int:
     if args.duration is not None:
         cfg = replace(cfg, duration=args.duration)
     if args.substeps is not None:
-        if args.substeps < 1:
-            raise ValueError(f"--substeps must be at least 1, got {args.substeps}")
         cfg = replace(cfg, substeps=args.substeps)
+    _refuse_overwrite(args.out, args.force)
     stats = generate(args.kind, args.num, args.seed, args.out, workers=args.workers, config=cfg,
                      progress=not args.no_progress)
     print(f"wrote {stats['num']} {args.kind} trajectories to {args.out} in "
@@ -81,6 +133,7 @@ def _import_mit(args: argparse.Namespace) -> int:
     n = import_mit(args.paths, args.out, sel, dt=args.dt,
                    max_duration=args.duration if args.duration > 0 else None,
                    friction=args.friction, skip_bad=args.skip_bad)
+    _refuse_empty(n, args.out)
     print(f"imported {n} MIT pushes into {args.out}")
     return 0
 
@@ -90,6 +143,7 @@ def _import_movi(args: argparse.Namespace) -> int:
 
     n = import_movi(args.paths, load_mesh_map(args.meshes), args.out, skip_bad=args.skip_bad,
                     frame_rate=args.frame_rate, floor_half_size=args.floor_half_size)
+    _refuse_empty(n, args.out)
     print(f"imported {n} MOVi scenes into {args.out}")
     return 0
 
@@ -98,22 +152,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the data subcommands to ``subparsers`` (of the ``fignet-gym`` parser)."""
     from fignet_gym.data.generate import KINDS
 
+
     g = subparsers.add_parser("generate", help="generate MuJoCo training trajectories",
                               description="Generate trajectories with MuJoCo into an HDF5 file.")
     g.add_argument("kind", choices=KINDS)
-    g.add_argument("--num", type=int, required=True, help="number of trajectories")
-    g.add_argument("--seed", type=int, default=0, help="base seed (non-negative)")
+    g.add_argument("--num", type=int_at_least(1), required=True, help="number of trajectories")
+    g.add_argument("--seed", type=int_at_least(0), default=0, help="base seed (non-negative)")
     g.add_argument("--out", required=True, help="output .h5 file (written atomically)")
-    g.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
+    g.add_argument("--force", action="store_true", help="replace OUT if it exists (default: refuse)")
+    g.add_argument("--workers", type=int_at_least(1), default=min(2, os.cpu_count() or 1),
                    help="processes (results do not depend on it)")
-    g.add_argument("--duration", type=float, default=None,
+    g.add_argument("--duration", type=positive_float, default=None,
                    help="seconds per trajectory (default: 1.0 push, 2.0 toss)")
-    g.add_argument("--substeps", type=int, default=None,
+    g.add_argument("--substeps", type=int_at_least(1), default=None,
                    help="MuJoCo steps of 2 ms per stored pose (default 10: dt = 0.02 s)")
-    g.add_argument("--sphere-subdivisions", type=int, default=1,
+    g.add_argument("--sphere-subdivisions", type=int_at_least(0), default=1,
                    help="toss: icosphere level of spheres (1: 42 nodes)")
-    g.add_argument("--cylinder-sections", type=int, default=12, help="toss: cylinder facets")
-    g.add_argument("--box-subdivisions", type=int, default=0,
+    g.add_argument("--cylinder-sections", type=int_at_least(3), default=12,
+                   help="toss: cylinder facets")
+    g.add_argument("--box-subdivisions", type=int_at_least(0), default=0,
                    help="toss: cube subdivisions (0: 8 corner nodes)")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
     g.set_defaults(func=_guarded(_generate))
@@ -122,9 +179,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("file")
     s.add_argument("--traj", type=int, default=0, help="trajectory index in the file")
     s.add_argument("--out", default=None, help=".mp4 or .gif (default: <file>_traj<K>.mp4)")
-    s.add_argument("--fps", type=float, default=None, help="default: 1 / dt (real time)")
-    s.add_argument("--width", type=int, default=480)
-    s.add_argument("--height", type=int, default=480)
+    s.add_argument("--fps", type=positive_float, default=None, help="default: 1 / dt (real time)")
+    s.add_argument("--width", type=int_at_least(1), default=480)
+    s.add_argument("--height", type=int_at_least(1), default=480)
     s.add_argument("--azimuth", type=float, default=90.0)
     s.add_argument("--elevation", type=float, default=-45.0)
     s.add_argument("--distance", type=float, default=None, help="default: fitted to the motion")
@@ -139,7 +196,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     m.add_argument("--acceleration", nargs="+", type=float, default=[0.0],
                    help="the file name's 'a' (default: 0, constant speed)")
     m.add_argument("--any-acceleration", action="store_true")
-    m.add_argument("--dt", type=float, default=0.02, help="resampling step (s)")
+    m.add_argument("--dt", type=positive_float, default=0.02, help="resampling step (s)")
     m.add_argument("--duration", type=float, default=0.5,
                    help="cut each push after this many seconds (0: keep all)")
     m.add_argument("--friction", type=float, default=0.25,
@@ -152,9 +209,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     v.add_argument("--meshes", required=True,
                    help="JSON object {shape_label or asset_id: mesh file}")
     v.add_argument("--out", required=True)
-    v.add_argument("--frame-rate", type=float, default=None,
+    v.add_argument("--frame-rate", type=positive_float, default=None,
                    help="default: the record's metadata.frame_rate, else 12")
-    v.add_argument("--floor-half-size", type=float, default=20.0)
+    v.add_argument("--floor-half-size", type=positive_float, default=20.0)
     v.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
     v.set_defaults(func=_guarded(_import_movi))
 

@@ -43,6 +43,15 @@ FORMAT_VERSION = 1
 #: Allowed deviation of a stored quaternion's norm from 1 (float32 storage keeps ~1e-7).
 QUAT_NORM_TOL = 1e-3
 INCOMPLETE_SUFFIX = ".incomplete"
+#: Largest accepted distance (m) of any object from the origin: beyond it a pose is a data
+#: error, not a scene (float32 keeps only ~1 mm at 1e4 m).
+MAX_POSITION = 1e4
+#: Largest accepted speed (m/s) of an object between two stored poses: faster means a teleport
+#: (a tracking glitch or a broken simulation); the data sets move at a few m/s.
+MAX_SPEED = 100.0
+#: Largest dataset (bytes) a trajectory field may declare: checked before reading, so a small
+#: corrupt file declaring gigabytes is refused instead of exhausting memory.
+MAX_FIELD_BYTES = 1 << 28
 
 
 class TrajectoryFormatError(ValueError):
@@ -165,6 +174,19 @@ def validate_trajectory(traj: Trajectory, file: str | os.PathLike | None = None)
             f"{QUAT_NORM_TOL})")
     if not (np.isfinite(traj.dt) and traj.dt > 0):
         raise TrajectoryFormatError(f"{w('dt')}: must be a positive number, got {traj.dt}")
+    far = np.abs(poses[..., :3]).max(axis=-1)
+    if (far > MAX_POSITION).any():
+        t, o = np.unravel_index(int(np.argmax(far)), far.shape)
+        raise TrajectoryFormatError(
+            f"{w('poses')}: object {o} is {far[t, o]:.3g} m from the origin at step {t} "
+            f"(limit {MAX_POSITION:g} m)")
+    if poses.shape[0] > 1:
+        speed = np.linalg.norm(np.diff(poses[..., :3].astype(np.float64), axis=0), axis=-1) / traj.dt
+        if (speed > MAX_SPEED).any():
+            t, o = np.unravel_index(int(np.argmax(speed)), speed.shape)
+            raise TrajectoryFormatError(
+                f"{w('poses')}: object {o} jumps {speed[t, o] * traj.dt:.3g} m between steps {t} "
+                f"and {t + 1} ({speed[t, o]:.3g} m/s; limit {MAX_SPEED:g} m/s)")
     kinds = np.asarray(traj.kinds)
     if kinds.shape != (n_obj,) or not np.isin(kinds, [int(k) for k in ObjectKind]).all():
         raise TrajectoryFormatError(
@@ -292,11 +314,24 @@ def write_trajectories(path: str | os.PathLike, trajs: Iterable[Trajectory],
 # --------------------------------------------------------------------------- reading
 
 
-def _read_field(g: h5py.Group, key: str, where: str) -> np.ndarray:
+def _read_field(g: h5py.Group, key: str, where: str, ndim: int | None = None,
+                last: int | None = None) -> np.ndarray:
+    """A field's array, its declared shape and size checked before anything is read."""
     if key not in g:
         raise TrajectoryFormatError(f"{where}: missing field {key!r}")
     try:
-        return g[key][()]
+        dset = g[key]
+        shape, nbytes = dset.shape, dset.size * dset.dtype.itemsize
+    except (OSError, KeyError, ValueError, TypeError, AttributeError) as err:
+        raise TrajectoryFormatError(f"{where}: field {key!r} is unreadable ({err})") from None
+    if (ndim is not None and len(shape or ()) != ndim) or (last is not None and shape[-1] != last):
+        raise TrajectoryFormatError(f"{where}: field {key!r} has shape {shape}, expected "
+                                    f"{ndim} dimensions" + (f" ending in {last}" if last else ""))
+    if nbytes > MAX_FIELD_BYTES:
+        raise TrajectoryFormatError(f"{where}: field {key!r} declares {nbytes / 1e9:.3g} GB "
+                                    f"(shape {shape}; limit {MAX_FIELD_BYTES / 1e9:.3g} GB)")
+    try:
+        return dset[()]
     except (OSError, KeyError, ValueError, TypeError) as err:
         raise TrajectoryFormatError(f"{where}: field {key!r} is unreadable ({err})") from None
 
@@ -382,7 +417,7 @@ class TrajectoryFile:
             extras = {k: _read_field(g["extras"], k, where) for k in g["extras"]}
         names_raw = _read_field(g, "names", where)
         traj = Trajectory(
-            poses=_read_field(g, "poses", where),
+            poses=_read_field(g, "poses", where, ndim=3, last=7),
             dt=float(g.attrs["dt"]),
             kinds=_read_field(g, "kinds", where).astype(np.int64),
             props=_read_field(g, "props", where),

@@ -466,7 +466,13 @@ def generate(kind: str, num: int, seed: int, out: str | os.PathLike, workers: in
     """Generate ``num`` trajectories of ``kind`` into ``out`` (atomic); returns timing stats."""
     from tqdm import tqdm
 
+    if isinstance(num, bool) or not isinstance(num, int) or num < 1:
+        raise ValueError(f"num must be an integer >= 1, got {num!r}")
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
     cfg = config or default_config(kind)
+    if not (math.isfinite(cfg.duration) and cfg.duration > 0):
+        raise ValueError(f"duration must be a finite number of seconds > 0, got {cfg.duration!r}")
     meta = {"kind": kind, "seed": seed, "num": num, "generator_version": GENERATOR_VERSION,
             "mujoco_version": mujoco.__version__, "config": _jsonable(dataclasses.asdict(cfg))}
     start = time.perf_counter()

@@ -518,6 +518,9 @@ def import_movi(paths: Iterable[str | os.PathLike], mesh_map: Mapping[str, str |
     """Import MOVi records into ``out``: JSON files, or directories searched for ``metadata.json``
     (a Kubric worker's output folder also holds other JSON files)."""
     files = _expand(paths, ("metadata.json",))
+    if not files:
+        raise DataImportError(f"{', '.join(map(str, paths))}: no metadata.json found (a Kubric "
+                              "worker writes one per scene)")
     with TrajectoryWriter(out, {"source": "kubric_movi"}) as writer:
         for f in files:
             try:

@@ -122,6 +122,9 @@ class SimulatorConfig:
             raise ValueError(f"collision must be 'face' or 'node', got {self.collision!r}")
         if self.history < 1 or self.dt <= 0 or self.collision_radius <= 0:
             raise ValueError("history >= 1, dt > 0 and collision_radius > 0 are required")
+        from fignet_gym.simulator.checkpoint import check_config
+
+        check_config(self)  # bounded sizes: a config can never ask for unbounded memory
 
     @property
     def face_groups(self) -> tuple[FaceGroup, ...]:
@@ -427,11 +430,14 @@ class LearnedSimulator(nn.Module):
 
     # ------------------------------------------------------------------ checkpoints
     def save(self, path: str | Path, meta: dict[str, Any] | None = None) -> None:
-        """Write weights, normalisers and config atomically (temporary file, then rename)."""
+        """Write weights, normalisers and config atomically (temporary file, then rename), sealed
+        with a content checksum (:mod:`fignet_gym.simulator.checkpoint`)."""
+        from fignet_gym.simulator.checkpoint import seal
+
         path = Path(path)
         tmp = path.with_name(path.name + ".tmp")
-        torch.save({"format": CHECKPOINT_FORMAT, "config": self.config.to_dict(),
-                    "state_dict": self.state_dict(), "meta": meta or {}}, tmp)
+        torch.save(seal({"format": CHECKPOINT_FORMAT, "config": self.config.to_dict(),
+                         "state_dict": self.state_dict(), "meta": meta or {}}), tmp)
         tmp.replace(path)
 
     @staticmethod
@@ -444,26 +450,13 @@ class LearnedSimulator(nn.Module):
     def load_with_meta(path: str | Path, map_location: str | torch.device = "cpu"
                        ) -> tuple[LearnedSimulator, dict[str, Any]]:
         """:meth:`load` that also returns the checkpoint's metadata dictionary."""
-        path = Path(path)
-        if not path.is_file():
-            raise CheckpointError(f"{path}: no such checkpoint file")
-        try:
-            blob = torch.load(path, map_location=map_location, weights_only=True)
-        except Exception as exc:  # noqa: BLE001 - any unpickling failure means a bad file
-            raise CheckpointError(f"{path}: not a readable fignet_gym checkpoint ({exc})") from exc
-        if not isinstance(blob, dict) or blob.get("format") != CHECKPOINT_FORMAT:
-            raise CheckpointError(f"{path}: not a fignet_gym checkpoint (format tag missing)")
-        try:
-            config = SimulatorConfig.from_dict(blob["config"])
-        except CheckpointError as exc:
-            raise CheckpointError(f"{path}: {exc}") from exc
+        from fignet_gym.simulator.checkpoint import read_checkpoint
+
+        config, state, meta = read_checkpoint(path, map_location)  # validated: shapes match
         sim = LearnedSimulator(config)
-        try:
-            sim.load_state_dict(sim.upgrade_state_dict(blob["state_dict"]))
-        except RuntimeError as exc:
-            raise CheckpointError(f"{path}: weights do not match its config ({exc})") from exc
+        sim.load_state_dict(state)
         sim.to(map_location).eval()
-        return sim, dict(blob.get("meta", {}))
+        return sim, meta
 
     def upgrade_state_dict(self, state: dict[str, Tensor]) -> dict[str, Tensor]:
         """``state`` without the last processor block's object-update weights, which checkpoints

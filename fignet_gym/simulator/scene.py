@@ -243,7 +243,8 @@ class Scene:
         Free-jointed bodies are dynamic, mocap bodies kinematic, the world body and bodies welded to
         it static. Only geoms that can collide (``contype`` or ``conaffinity`` non-zero) are meshed;
         visual-only geoms are ignored. Raises :class:`UnsupportedSceneError` naming the body for
-        hinge, slide or ball joints, or for bodies welded to a moving body.
+        hinge, slide or ball joints, free bodies without a collidable geom, or bodies welded to a
+        moving body.
         """
         opts = options or MeshOptions()
         data = mujoco.MjData(model)
@@ -283,6 +284,12 @@ class Scene:
         for b in range(model.nbody):
             kind = kind_of(b)  # validate every body, even those without geometry
             if b not in per_body:
+                if kind == ObjectKind.DYNAMIC:
+                    # MuJoCo would move it (gravity, its joint); FIGNet has no node for it, so it
+                    # would hang in the air: a silently wrong answer.
+                    raise UnsupportedSceneError(
+                        f"body '{body_name(b)}' has a free joint but no collidable geom "
+                        "(contype or conaffinity non-zero): FIGNet cannot represent it")
                 continue
             parts = [_geom_in_body(model, g, opts) for g in per_body[b]]
             offs = np.cumsum([0] + [len(p[0]) for p in parts[:-1]])

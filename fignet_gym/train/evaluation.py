@@ -285,6 +285,8 @@ def floor_table(data: str, noises: list[float], out: str | None = None, num: int
     from fignet_gym.data.format import load_trajectories
 
     trajs = load_trajectories(data)[:num]
+    if not trajs:
+        raise ValueError(f"{data}: holds no trajectories")
     rows = [perturbation_floor(trajs, n, history=history, horizon=horizon) for n in noises]
     print(f"MuJoCo re-run from a start nudged by the noise: {len(trajs)} trajectories of {data}, "
           f"error at step {rows[0]['horizon_step']} (median; % of no motion)")
@@ -352,6 +354,27 @@ def paired_ratios(res: dict[str, Any], ref: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def data_scene_type(traj: Trajectory) -> str:
+    """The scene type (``"push"``, ``"toss"``; ``""``: unknown) a trajectory's metadata implies."""
+    kind, source = str(traj.metadata.get("kind", "")), str(traj.metadata.get("source", ""))
+    if kind == "push" or source.startswith("mit_pushing"):
+        return "push"
+    if kind.startswith("toss") or source.startswith("kubric_movi"):
+        return "toss"
+    return ""
+
+
+def check_data_matches(sim: LearnedSimulator, trajs: list[Trajectory], data: str | Path) -> None:
+    """``ValueError`` naming ``data`` if it is empty or of another scene type than ``sim``'s."""
+    if not trajs:
+        raise ValueError(f"{data}: holds no trajectories")
+    trained = sim.config.scene_type
+    kinds = {data_scene_type(t) for t in trajs} - {""}
+    if trained and kinds and kinds != {trained}:
+        raise ValueError(f"{data}: holds {'/'.join(sorted(kinds))} trajectories, the checkpoint was "
+                         f"trained on '{trained}' scenes")
+
+
 def evaluate(checkpoint: str, data: str, out: str, num: int = 32, horizon: int = 50,
              videos: int = 2, against: str | None = None) -> dict[str, Any]:
     """Evaluate a checkpoint on a trajectory file: print a table, write JSON, plots and videos.
@@ -362,14 +385,20 @@ def evaluate(checkpoint: str, data: str, out: str, num: int = 32, horizon: int =
     from fignet_gym.data.format import load_trajectories
     from fignet_gym.pretrained import load_checkpoint
 
+    if num < 1 or horizon < 1 or videos < 0:
+        raise ValueError(f"evaluate: num and horizon must be >= 1 and videos >= 0, got "
+                         f"{num}, {horizon}, {videos}")
     sim = load_checkpoint(checkpoint)
     trajs = load_trajectories(data)[:num]
+    check_data_matches(sim, trajs, data)
     outdir = Path(out)
     outdir.mkdir(parents=True, exist_ok=True)
     res = rollout_metrics(sim, trajs, horizon=horizon)
     res.update(checkpoint=str(checkpoint), data=str(data))
     if against is not None:
-        ref = rollout_metrics(load_checkpoint(against), trajs, horizon=horizon)
+        other = load_checkpoint(against)
+        check_data_matches(other, trajs, data)
+        ref = rollout_metrics(other, trajs, horizon=horizon)
         res["against"] = {"checkpoint": str(against), "translation_rmse_final": ref["translation_rmse_final"],
                           "rotation_deg_final": ref["rotation_deg_final"], "ratios": paired_ratios(res, ref)}
     (outdir / "metrics.json").write_text(json.dumps(res, indent=2))

@@ -15,7 +15,7 @@ from typing import Any
 from fignet_gym.data.format import build_scene, load_trajectories
 from fignet_gym.pretrained import pretrained_dir
 from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
-from fignet_gym.train.evaluation import rollout_metrics
+from fignet_gym.train.evaluation import check_data_matches, rollout_metrics
 from fignet_gym.train.training import median_node_acceleration
 
 
@@ -26,6 +26,7 @@ def ship(run: str, name: str, data: str, horizon: int, num: int = 64, dest: str 
     sim, meta = LearnedSimulator.load_with_meta(run_dir / "best.pt")
     state = _train_state(run_dir, meta.get("valid", {}))
     trajs = load_trajectories(data)[:num]
+    check_data_matches(sim, trajs, data)
     metrics = rollout_metrics(sim, trajs, horizon=horizon)
     scenes = [build_scene(t, sim.config.mesh_options) for t in trajs]
     metrics["median_node_acceleration"] = median_node_acceleration(trajs, scenes)

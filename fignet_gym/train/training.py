@@ -11,7 +11,11 @@ A run directory holds ``config.json``, ``last.pt`` (model + optimiser + sampler 
 atomically every ``checkpoint_every`` steps and on interruption), ``best.pt`` (lowest validation
 rollout error), ``curve.jsonl`` (one JSON line per validation: step, CPU hours of the training
 steps summed over processes (validation and checkpoint writes not counted), graphs seen, errors)
-and TensorBoard logs. ``--resume`` continues exactly where a killed run stopped.
+and TensorBoard logs. ``--resume`` continues exactly where a killed run stopped: a SIGKILL loses
+the steps since ``last.pt`` (fewer than ``checkpoint_every``), which the resumed run recomputes;
+records of those steps are dropped on resume (:mod:`fignet_gym.train.rundir`). A folder holding a
+run is never overwritten without ``--force``, and ``--resume`` refuses a config other than the
+run's.
 """
 
 from __future__ import annotations
@@ -32,10 +36,18 @@ from torch import Tensor
 
 from fignet_gym.data.format import Trajectory, build_scene, load_trajectories
 from fignet_gym.pretrained import load_checkpoint
+from fignet_gym.simulator.checkpoint import read_checkpoint
 from fignet_gym.simulator.geometry import quat_mul
 from fignet_gym.simulator.graph import FACE_BASE, FACE_GROUPS
-from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
+from fignet_gym.simulator.model import CheckpointError, LearnedSimulator, SimulatorConfig
 from fignet_gym.simulator.scene import Scene
+from fignet_gym.train.rundir import (
+    PENDING_BEST,
+    check_resume_config,
+    prepare_run_folder,
+    promote_best,
+    rewind,
+)
 
 # Training settings of retired experiments and the one value each still accepts (as
 # ``model.RETIRED_KEYS`` for the simulator's), so that run configs that name them keep loading.
@@ -96,9 +108,27 @@ class TrainConfig:
     threads: int = 0
     seed: int = 0
 
+    def __post_init__(self) -> None:
+        # Zero or negative counts would divide by zero or never validate; say what is allowed.
+        for f in fields(self):
+            value, lo = getattr(self, f.name), _TRAIN_MINIMUM.get(f.name, 0)
+            if f.type == "bool":
+                if not isinstance(value, bool):
+                    raise ValueError(f"training.{f.name} must be true or false, got {value!r}")
+            elif f.type == "int":
+                if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+                    raise ValueError(f"training.{f.name} must be an integer >= {lo}, got {value!r}")
+            elif (isinstance(value, bool) or not isinstance(value, (int, float))
+                  or not math.isfinite(value) or value < lo
+                  or (f.name in _TRAIN_POSITIVE and value <= 0)):
+                rule = "> 0" if f.name in _TRAIN_POSITIVE else f">= {lo}"
+                raise ValueError(f"training.{f.name} must be a finite number {rule}, got {value!r}")
+        if self.ema_decay >= 1:
+            raise ValueError(f"training.ema_decay must be below 1, got {self.ema_decay!r}")
+
     @staticmethod
     def from_dict(d: dict[str, Any]) -> TrainConfig:
-        """Build from a dict; unknown keys are an error, and so is a retired key
+        """Build from a dict; unknown keys and out-of-range values are an error, and so is a retired key
         (:data:`RETIRED_TRAINING_KEYS`) set to anything but the one value it still accepts."""
         d = dict(d)
         for key, accepted in RETIRED_TRAINING_KEYS.items():
@@ -109,6 +139,13 @@ class TrainConfig:
         if unknown:
             raise ValueError(f"unknown training config keys {sorted(unknown)}")
         return TrainConfig(**d)
+
+
+#: Smallest allowed value of the integer training settings (others: 0).
+_TRAIN_MINIMUM = {"steps": 1, "batch_size": 1, "valid_every": 1, "valid_trajectories": 1,
+                  "valid_horizon": 1, "checkpoint_every": 1}
+#: Float training settings that must be strictly positive.
+_TRAIN_POSITIVE = {"lr", "lr_final"}
 
 
 # Latent 64, 5 message-passing steps, no mesh-mesh edges (FIGNet*): cheaper per graph than the
@@ -162,9 +199,17 @@ def load_run_config(spec: str | None, overrides: dict[str, Any] | None = None
         path = Path(spec)
         if not path.is_file():
             raise ValueError(f"config {spec!r} is neither a preset ({', '.join(PRESETS)}) nor a file")
-        raw = json.loads(path.read_text())
+        try:
+            raw = json.loads(path.read_text())
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"{path}: not a readable JSON config ({exc})") from None
+        if not isinstance(raw, dict) or not all(isinstance(raw.get(k, {}), dict)
+                                                for k in ("simulator", "training")):
+            raise ValueError(f'{path}: expected {{"simulator": {{...}}, "training": {{...}}}}')
     for key, val in (overrides or {}).items():
-        section, name = key.split(".", 1)
+        section, _, name = str(key).partition(".")
+        if section not in ("simulator", "training") or not name:
+            raise ValueError(f"override {key!r}: keys are 'simulator.<field>' or 'training.<field>'")
         raw.setdefault(section, {})[name] = val
     return raw.get("simulator", {}), TrainConfig.from_dict(raw.get("training", {}))
 
@@ -316,6 +361,10 @@ def init_distributed() -> tuple[int, int, torch.device]:
     return dist.get_rank(), dist.get_world_size(), device
 
 
+#: What ``last.pt``'s metadata must hold for ``--resume``.
+_RESUME_KEYS = ("optimizer", "scheduler", "train_state", "sampler_rng", "noise_rng")
+
+
 class Trainer:
     """Trains a :class:`LearnedSimulator` on trajectory files; see the module docstring."""
 
@@ -358,8 +407,11 @@ class Trainer:
             raise ValueError(f"training and validation data mix step lengths {sorted(dts)}")
         last = self.out / "last.pt"
         if resume and last.is_file():
-            blob = torch.load(last, map_location="cpu", weights_only=True)
-            return SimulatorConfig.from_dict(blob["config"]), blob
+            config, state_dict, meta = read_checkpoint(last)  # CheckpointError if damaged
+            missing = [k for k in _RESUME_KEYS if k not in meta]
+            if missing:
+                raise CheckpointError(f"{last}: not a resumable run checkpoint (no {missing[0]})")
+            return config, {"state_dict": state_dict, "meta": meta}
         if resume:
             print(f"--resume: no {last}, starting a new run")
         return SimulatorConfig.from_dict({**sim_cfg, "dt": dts.pop()}), None
@@ -396,6 +448,7 @@ class Trainer:
         if self.rank == 0:  # other processes continue with fresh draws
             self.sampler.rng.bit_generator.state = json.loads(meta["sampler_rng"])
             self.gen.set_state(meta["noise_rng"])
+        rewind(self.out, self.state.step)  # drop records of steps a kill discarded
         print(f"resumed from {last} at step {self.state.step}")
 
     # -------------------------------------------------------------- data parallelism
@@ -482,7 +535,9 @@ class Trainer:
         from tqdm import tqdm
 
         lead = self.rank == 0
-        writer = SummaryWriter(str(self.out / "tb")) if lead else None
+        # A resumed run hides TensorBoard events of steps after its checkpoint (a kill's leftovers).
+        purge = self.state.step + 1 if self.state.step else None
+        writer = SummaryWriter(str(self.out / "tb"), purge_step=purge) if lead else None
         stop = {"flag": False}
 
         def _stop(signum: int, _frame: object) -> None:
@@ -577,7 +632,8 @@ class Trainer:
                     writer.add_scalar(f"valid/{k}", v, st.step)
         if key < st.best_error:
             st.best_error = key
-            self.model.save(self.out / "best.pt", meta={"valid": rec})
+            # best.pt itself changes only with the next last.pt (rundir.promote_best).
+            self.model.save(self.out / PENDING_BEST, meta={"valid": rec})
         print(f"\nstep {st.step}: " + ", ".join(f"{k}={v:.4g}" for k, v in rec.items() if k != "step"))
         return rec
 
@@ -590,17 +646,29 @@ class Trainer:
         if self.ema is not None:
             meta["ema"] = self.ema.state_dict()
         self.sim.save(self.out / "last.pt", meta=meta)
+        promote_best(self.out)
 
 
 def train_from_files(data: str | Sequence[str], valid: str | None, config: str | None, out: str,
                      resume: bool = False, overrides: dict[str, Any] | None = None,
-                     max_train: int | None = None, init: str | None = None) -> TrainState:
-    """Load data (one file or several, pooled in order), build a :class:`Trainer` and run it."""
+                     max_train: int | None = None, init: str | None = None,
+                     force: bool = False) -> TrainState:
+    """Load data (one file or several, pooled in order), build a :class:`Trainer` and run it.
+
+    ``out`` must not hold a run unless ``resume`` (continue it: ``config`` must then match the
+    run's, and defaults to its ``config.json``) or ``force`` (replace it).
+    """
+    out_dir = Path(out)
+    prepare_run_folder(out_dir, resume, force)
+    if resume and config is None and (out_dir / "config.json").is_file():
+        config = str(out_dir / "config.json")
+    sim_cfg, cfg = load_run_config(config, overrides)
+    if resume:
+        check_resume_config(out_dir, sim_cfg, asdict(cfg))
     files = [data] if isinstance(data, (str, Path)) else list(data)
     train_trajs = [t for f in files for t in load_trajectories(f)]
     if max_train:
         train_trajs = train_trajs[:max_train]
     valid_trajs = load_trajectories(valid) if valid else train_trajs[-4:]
-    sim_cfg, cfg = load_run_config(config, overrides)
-    trainer = Trainer(sim_cfg, cfg, train_trajs, valid_trajs, Path(out), resume=resume, init=init)
+    trainer = Trainer(sim_cfg, cfg, train_trajs, valid_trajs, out_dir, resume=resume, init=init)
     return trainer.run()
