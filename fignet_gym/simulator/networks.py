@@ -222,12 +222,11 @@ def edge_first_layer(first: nn.Linear, e: Tensor, v: Tensor, index: EdgeIndex) -
     v_t = v if index.table_nodes is None else v.index_select(0, index.table_nodes)
     if index.table_edges is None:
         return _table_first_layer(first, e, v_t, index.table_rows)
-    out = e.new_empty(e.shape[0], first.weight.shape[0])
     g, t = index.gather_edges, index.table_edges
-    out.index_copy_(0, g, _gathered_first_layer(first, e.index_select(0, g), v,
-                                                 index.nodes.index_select(0, g)))
-    out.index_copy_(0, t, _table_first_layer(first, e.index_select(0, t), v_t, index.table_rows))
-    return out
+    pre_g = _gathered_first_layer(first, e.index_select(0, g), v, index.nodes.index_select(0, g))
+    pre_t = _table_first_layer(first, e.index_select(0, t), v_t, index.table_rows)
+    out = pre_g.new_empty(e.shape[0], first.weight.shape[0])  # autocast may have made it bf16
+    return out.index_copy_(0, g, pre_g).index_copy_(0, t, pre_t.to(out.dtype))
 
 
 @dataclass(frozen=True)
