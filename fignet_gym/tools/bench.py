@@ -7,6 +7,11 @@ edges; and MuJoCo's time to advance the same scene by the same simulated time, a
 shared cores are noisy: compare the ratios, measured in one run, rather than absolute numbers. On a
 machine whose cores are busy, use ``--threads 1``: OpenMP threads spin-waiting for a descheduled peer
 make more threads much slower (``OMP_WAIT_POLICY=PASSIVE`` limits the damage).
+
+``--shipped``: the shipped models at each ``--batch`` size, stepped as ``FIGNetDynamics`` does,
+with the network's analytic FLOPs and its GFLOP/s next to plain ``torch.mm`` on the same shapes
+(:mod:`fignet_gym.tools.bench_limits`). ``--rollout``: ``Dynamics.rollout`` scene-steps per second,
+learned against ``mujoco.rollout``. ``--json PATH`` writes their figures. Timings are CPU seconds.
 """
 
 from __future__ import annotations
