@@ -17,6 +17,7 @@ when one of its names is used.
 from typing import Any
 
 from fignet_gym.envs.base import MjDynamicsEnv
+from fignet_gym.envs.cube_toss import CubeTossEnv, CubeTossVectorEnv
 from fignet_gym.envs.push import PushEnv, PushVectorEnv
 from fignet_gym.envs.toss import TossEnv, TossVectorEnv
 from fignet_gym.envs.vector import BatchedVectorEnv
@@ -25,6 +26,8 @@ from fignet_gym.registration import ENV_IDS, register_envs
 __all__ = [
     "ENV_IDS",
     "BatchedVectorEnv",
+    "CubeTossEnv",
+    "CubeTossVectorEnv",
     "MjDynamicsEnv",
     "PushEnv",
     "PushVectorEnv",

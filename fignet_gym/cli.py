@@ -93,6 +93,17 @@ def _ship(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sim2real(args: argparse.Namespace) -> int:
+    from fignet_gym.train.sim2real import default_train, parse_sizes, run_sim2real
+
+    run_sim2real(args.data, args.out, parse_sizes(args.sizes), fractions=args.fractions,
+                 seed=args.seed, horizon=args.horizon, resume=args.resume,
+                 fit_evaluations=args.fit_evaluations, fit_trajectories=args.fit_trajectories,
+                 train_fn=default_train(args.config, args.budget, _overrides(args.set) or None, args.init),
+                 fignet=not args.no_fignet)
+    return 0
+
+
 def _bench(args: argparse.Namespace) -> int:
     from fignet_gym.tools.bench import run
 
@@ -129,7 +140,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="training trajectories (HDF5; several files are pooled)")
     t.add_argument("--valid", help="validation trajectories (default: last 4 of --data)")
     t.add_argument("--config",
-                   help="preset name (push-cpu, push-finetune, push-scratch, toss-cpu, paper) or JSON file")
+                   help="preset name (push-cpu, push-finetune, push-scratch, toss-cpu, cube-real, "
+                   "paper) or JSON file")
     t.add_argument("--set", help='JSON overrides, e.g. \'{"training.steps": 500}\'')
     t.add_argument("--out", required=True, help="run folder (checkpoints, logs)")
     t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt (the run's "
@@ -137,16 +149,18 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--force", action="store_true", help="replace a run already in OUT")
     t.add_argument("--max-train", type=int_at_least(1),
                    help="use only the first N training trajectories")
-    t.add_argument("--init", help="start from this checkpoint's weights (fine-tuning a new run)")
+    t.add_argument("--init", help="start from this checkpoint's weights (fine-tuning a new run): "
+                   "a checkpoint file or a pretrained name (push, toss, cube-real)")
     t.set_defaults(func=_train)
 
     e = sub.add_parser("evaluate", help="rollout metrics, plots and videos of a checkpoint")
     e.add_argument("--checkpoint", required=True, help="checkpoint file or pretrained name")
     e.add_argument("--data", required=True, help="held-out trajectories (HDF5)")
     e.add_argument("--out", default="outputs/eval", help="folder for metrics.json, plots, videos")
-    e.add_argument("--num", type=int_at_least(1), default=32, help="trajectories to evaluate")
+    e.add_argument("--num", type=int_at_least(1), default=None, help="first N trajectories (default: all)")
     e.add_argument("--horizon", type=int_at_least(1), default=50,
-                   help="step at which errors are reported")
+                   help="frame of the headline errors, counted from frame 0 of each trajectory "
+                   "(each trajectory's last frame is scored too)")
     e.add_argument("--videos", type=int_at_least(0), default=2, help="side-by-side videos to write")
     e.add_argument("--against", help="second checkpoint (e.g. a baseline) on the same trajectories: "
                    "ratio of median errors with a bootstrap interval")
@@ -176,6 +190,29 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--dest", help="folder (default: the package's pretrained/)")
     s.add_argument("--notes", default="", help="extra Markdown for the card")
     s.set_defaults(func=_ship)
+
+    r = sub.add_parser("sim2real", help="nominal and fitted MuJoCo vs FIGNet at several training-set "
+                       "sizes on real trajectories (split, fit, train, table, plot; resumable)")
+    r.add_argument("--data", required=True, help="trajectory file (e.g. from import-contactnets)")
+    r.add_argument("--out", required=True, help="run folder")
+    r.add_argument("--sizes", nargs="+", default=["8", "16", "32", "64", "128", "all"],
+                   help="FIGNet training-set sizes (first k of the training split; 'all')")
+    r.add_argument("--resume", action="store_true", help="continue a run in OUT")
+    r.add_argument("--fractions", type=float, nargs=3, default=[0.6, 0.2, 0.2],
+                   metavar=("TRAIN", "VALID", "TEST"))
+    r.add_argument("--seed", type=int, default=0, help="split, fit and training seed")
+    r.add_argument("--horizon", type=int, default=50, help="frame of the headline errors (from 0)")
+    r.add_argument("--fit-evaluations", type=int, default=240,
+                   help="CMA-ES candidates per friction cone")
+    r.add_argument("--fit-trajectories", type=int, default=64,
+                   help="training trajectories each candidate replays")
+    r.add_argument("--config", default="cube-real", help="FIGNet training preset or JSON")
+    r.add_argument("--budget", type=int, default=None,
+                   help="optimiser steps per FIGNet run (default: the recipe's, by size)")
+    r.add_argument("--init", default=None, help="warm-start FIGNet from a checkpoint or pretrained name")
+    r.add_argument("--set", help='JSON overrides of the training config, e.g. \'{"training.lr": 5e-4}\'')
+    r.add_argument("--no-fignet", action="store_true", help="MuJoCo stages only")
+    r.set_defaults(func=_sim2real)
 
     register_data(sub)
     return p

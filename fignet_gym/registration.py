@@ -17,6 +17,8 @@ from typing import Any
 ENV_SPECS: dict[str, tuple[str, str, int | None]] = {
     "fignet_gym/Push-v0": ("fignet_gym.envs.push:PushEnv", "fignet_gym.envs.push:PushVectorEnv", 50),
     "fignet_gym/Toss-v0": ("fignet_gym.envs.toss:TossEnv", "fignet_gym.envs.toss:TossVectorEnv", None),
+    "fignet_gym/CubeToss-v0": ("fignet_gym.envs.cube_toss:CubeTossEnv",
+                               "fignet_gym.envs.cube_toss:CubeTossVectorEnv", None),
 }
 #: Registered ids and their episode limits (Toss ends by itself once every object is released).
 ENV_IDS: dict[str, int | None] = {k: v[2] for k, v in ENV_SPECS.items()}

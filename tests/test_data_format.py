@@ -19,7 +19,7 @@ from fignet_gym.data.format import (
     write_trajectories,
 )
 from fignet_gym.mjcf import push_scene_xml
-from fignet_gym.simulator.scene import ObjectKind
+from fignet_gym.simulator.scene import ObjectKind, dampratio_to_restitution
 
 
 def _push_traj(name: str = "p0", steps: int = 4, shift: float = 0.0) -> Trajectory:
@@ -29,8 +29,10 @@ def _push_traj(name: str = "p0", steps: int = 4, shift: float = 0.0) -> Trajecto
     poses[:, 1, 0] = shift + 0.01 * np.arange(steps)
     poses[:, 1, 2] = 0.0065
     poses[:, 2, 0] = -0.1
+    # props as Scene.from_mjmodel reads the MJCF (writing checks them against it)
+    tip_rest = dampratio_to_restitution(0.5)
     return Trajectory(poses=poses, dt=0.02, kinds=np.array([1, 0, 2]),
-                      props=np.array([[0, 0.25, 0], [0.8374, 0.25, 0], [0.01, 0.25, 0]]),
+                      props=np.array([[0, 0.25, 0], [0.8374, 0.25, 0], [0.00283529, 0.25, tip_rest]]),
                       names=("world", "object", "tip"), mjcf=push_scene_xml("rect1"),
                       metadata={"seed": 3, "note": "unit test"},
                       extras={"force": np.ones((steps, 3))}, name=name)

@@ -14,7 +14,7 @@ from sim_factories import quiet_simulator, wild_simulator
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import fignet_gym.envs  # noqa: F401  (registers the environments)
-from fignet_gym.envs import PushEnv, TossEnv
+from fignet_gym.envs import CubeTossEnv, PushEnv, TossEnv
 
 ENV_IDS = ["fignet_gym/Push-v0", "fignet_gym/Toss-v0"]
 #: Keep learned Toss steps cheap in tests: 3 learned steps per toss instead of 50.
@@ -77,7 +77,7 @@ def _slice(cell: str) -> slice:
     return slice(a, b)
 
 
-@pytest.mark.parametrize("cls", [PushEnv, TossEnv])
+@pytest.mark.parametrize("cls", [PushEnv, TossEnv, CubeTossEnv])
 def test_docstring_tables_match_spaces(cls: type) -> None:
     env = cls()
     doc = inspect.getdoc(cls)

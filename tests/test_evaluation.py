@@ -176,3 +176,71 @@ def test_floor_command_prints_and_writes_each_noise_level(pushes: list, tmp_path
     assert rows[0]["translation_rmse_final"] < 1e-6 < rows[1]["translation_rmse_final"]
     assert "MuJoCo re-run" in capsys.readouterr().out
     assert out.with_suffix(".png").stat().st_size > 0
+
+
+def test_every_trajectory_is_scored_over_its_own_length_from_frame_0(pushes: list) -> None:
+    """A zero network keeps pushed objects still (they start at rest): its errors are the motion
+    since the last given pose, computed here by hand at the horizon and at each last frame."""
+    short = replace(pushes[0], poses=pushes[0].poses[:30], extras={})
+    trajs = [short, pushes[1]]
+    sim = zero_simulator("push")
+    m = rollout_metrics(sim, trajs, horizon=40)
+    H = sim.config.history + 1
+    motion = []
+    for t in trajs:
+        scene = build_scene(t, sim.config.mesh_options)
+        com = scene.com_positions(torch.as_tensor(t.poses, dtype=torch.float32))[:, t.kinds == 0]
+        motion.append((com - com[H - 1]).norm(dim=-1).squeeze(-1))
+    assert m["horizon_trajectories"] == 1 and m["trajectories"] == 2  # only the full push has frame 40
+    assert m["translation_rmse_final"] == pytest.approx(float(motion[1][40]), rel=1e-4, abs=1e-6)
+    np.testing.assert_allclose(m["translation_rmse_last_per_trajectory"],
+                               [float(motion[0][29]), float(motion[1][50])], rtol=1e-4, atol=1e-6)
+    assert m["translation_rmse_last_ratio_still"] == pytest.approx(1.0, abs=1e-4)
+    assert len(m["translation_rmse_curve"]) == 51 - H
+    with pytest.raises(ValueError, match="no trajectory reaches frame 60"):
+        rollout_metrics(sim, trajs, horizon=60)
+    with pytest.raises(ValueError, match="inside the 3 given poses"):
+        rollout_metrics(sim, trajs, horizon=2)
+
+
+def test_data_dt_must_be_the_models(pushes: list, tmp_path) -> None:
+    from fignet_gym.data.format import write_trajectories
+
+    with pytest.raises(ValueError, match=r"trajectory .*field 'dt' is 0.02 s, the model steps 0.01 s"):
+        rollout_metrics(zero_simulator("push", dt=0.01), pushes, horizon=10)
+    data, ckpt = tmp_path / "p.h5", tmp_path / "m.pt"
+    write_trajectories(data, pushes)
+    zero_simulator("push", dt=0.01).save(ckpt)
+    assert main(["evaluate", "--checkpoint", str(ckpt), "--data", str(data), "--out",
+                 str(tmp_path / "e"), "--videos", "0"]) == 2
+
+
+def test_free_flight_metric_on_real_tracked_tosses(tmp_path) -> None:
+    """On the real tosses the old test (second differences within 2% of g) never held; free flight
+    is now found by geometry, and the data's own acceleration (~9.6 m/s^2 down) is measured."""
+    from pathlib import Path
+
+    from fignet_gym.data.format import load_trajectories
+    from fignet_gym.data.tracked import import_contactnets
+    from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
+    from tests.sim_factories import SMALL
+
+    data = tmp_path / "cube.h5"
+    import_contactnets(Path(__file__).parent / "data" / "contactnets_sample", data)
+    trajs = load_trajectories(data)
+    cfg = SimulatorConfig(**{**SMALL, "dt": trajs[0].dt}, collision_radius=0.02,
+                          gravity=(0.0, 0.0, -9.81), scene_type="toss")
+    sim = LearnedSimulator(cfg).eval()
+    with torch.no_grad():
+        for p in sim.net.parameters():
+            p.zero_()
+    m = rollout_metrics(sim, trajs, horizon=50)
+    assert m["free_flight_steps"] > 10
+    assert -10.2 < m["free_flight_acceleration"] < -9.2
+    # the zero network predicts exactly the 9.81 prior: its error is the prior's 2% mismatch
+    # with the data's fall, plus tracking noise through the history
+    assert 0.005 < m["one_step_free_flight"] < 1.0
+    assert "one_step_free_flight_absent" not in m
+    still = rollout_metrics(zero_simulator("toss", dt=trajs[0].dt), trajs, horizon=50)
+    assert math.isnan(still["one_step_free_flight"])
+    assert "no gravity prior" in still["one_step_free_flight_absent"]

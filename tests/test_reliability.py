@@ -41,7 +41,7 @@ from fignet_gym.envs.push import PushEnv
 from fignet_gym.envs.sb3 import SB3VecEnvAdapter
 from fignet_gym.envs.toss import TossEnv
 from fignet_gym.mjcf import TossObject
-from fignet_gym.pretrained import pretrained_path
+from fignet_gym.pretrained import available_pretrained, pretrained_path
 from fignet_gym.simulator.checkpoint import (
     CheckpointWarning,
     add_checksum,
@@ -215,11 +215,13 @@ def test_nan_weights_are_refused_even_when_sealed(tmp_path: Path) -> None:
 
 
 def test_old_checkpoints_load_with_a_warning_and_can_be_sealed(tmp_path: Path) -> None:
-    """The shipped push.pt has no checksum: it loads (with a warning), and add_checksum re-saves
-    exactly the same content sealed, after which a flipped byte is caught."""
+    """A checkpoint from before checksums (push.pt with its checksum removed) loads with a
+    warning, and add_checksum re-saves exactly the same content sealed, after which a flipped
+    byte is caught."""
+    old_path = _unsealed(pretrained_path("push"), tmp_path / "old.pt")
     with pytest.warns(CheckpointWarning, match="add_checksum"):
-        old = LearnedSimulator.load(pretrained_path("push"))
-    sealed_path = add_checksum(pretrained_path("push"), tmp_path / "push.pt")
+        old = LearnedSimulator.load(old_path)
+    sealed_path = add_checksum(old_path, tmp_path / "push.pt")
     with warnings.catch_warnings():
         warnings.simplefilter("error", CheckpointWarning)
         new = LearnedSimulator.load(sealed_path)
@@ -228,6 +230,14 @@ def test_old_checkpoints_load_with_a_warning_and_can_be_sealed(tmp_path: Path) -
     _flip_weight_bytes(sealed_path, tmp_path / "bad.pt", 3)
     with pytest.raises(CheckpointError, match="checksum"):
         LearnedSimulator.load(tmp_path / "bad.pt")
+
+
+def test_shipped_checkpoints_are_sealed() -> None:
+    """Every shipped model carries its content checksum: it loads without a CheckpointWarning."""
+    for name in available_pretrained():
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", CheckpointWarning)
+            LearnedSimulator.load(pretrained_path(name))
 
 
 def _structural_variants(blob: dict) -> dict[str, object]:

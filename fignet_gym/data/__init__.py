@@ -1,8 +1,9 @@
 """Trajectory format, generators, importers and viewer.
 
 The format API is re-exported here; generators (:mod:`fignet_gym.data.generate`), importers
-(:mod:`fignet_gym.data.importers`) and the viewer (:mod:`fignet_gym.data.viewer`, which picks an
-OpenGL backend) are imported from their modules.
+(:mod:`fignet_gym.data.importers`, and :mod:`fignet_gym.data.tracked` for tracked real data: poses
+plus an MJCF), splits (:mod:`fignet_gym.data.split`) and the viewer
+(:mod:`fignet_gym.data.viewer`, which picks an OpenGL backend) are imported from their modules.
 """
 
 from fignet_gym.data.format import (
@@ -14,6 +15,8 @@ from fignet_gym.data.format import (
     load_trajectories,
     write_trajectories,
 )
+from fignet_gym.simulator.scene import dampratio_to_restitution, restitution_to_dampratio
 
 __all__ = ["ObjectMeshes", "Trajectory", "TrajectoryFile", "TrajectoryFormatError",
-           "TrajectoryWriter", "load_trajectories", "write_trajectories"]
+           "TrajectoryWriter", "dampratio_to_restitution", "load_trajectories",
+           "restitution_to_dampratio", "write_trajectories"]

@@ -1,4 +1,5 @@
-"""Data subcommands of ``fignet-gym``: ``generate``, ``show``, ``import-mit``, ``import-movi``.
+"""Data subcommands of ``fignet-gym``: ``generate``, ``show``, ``import-mit``, ``import-movi``,
+``import-contactnets``, ``split``.
 
 :func:`register` adds them to the main parser's subparsers; each sets ``func`` to a callable that
 takes the parsed arguments and returns an exit code. Known bad input (malformed files, unknown
@@ -148,6 +149,32 @@ def _import_movi(args: argparse.Namespace) -> int:
     return 0
 
 
+def _import_contactnets(args: argparse.Namespace) -> int:
+    from fignet_gym.data.tracked import import_contactnets
+
+    n = import_contactnets(args.directory, args.out, length_unit=args.length_unit,
+                           floor_half_size=args.floor_half_size, skip_bad=args.skip_bad)
+    print(f"imported {n} ContactNets tosses into {args.out}")
+    return 0
+
+
+def _split(args: argparse.Namespace) -> int:
+    from fignet_gym.data.split import write_split
+
+    paths = write_split(args.data, args.out, args.fractions, args.seed)
+    print(f"wrote {', '.join(str(p) for p in paths.values())}")
+    return 0
+
+
+def _mit_standin(args: argparse.Namespace) -> int:
+    from fignet_gym.data.standin import write_mit_standin
+
+    files = write_mit_standin(args.out, args.num, args.seed, penetration=args.penetration,
+                              position_noise=args.noise)
+    print(f"wrote {len(files)} stand-in MIT pushes (raw JSON) into {args.out}")
+    return 0
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the data subcommands to ``subparsers`` (of the ``fignet-gym`` parser)."""
     from fignet_gym.data.generate import KINDS
@@ -214,6 +241,35 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     v.add_argument("--floor-half-size", type=positive_float, default=20.0)
     v.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
     v.set_defaults(func=_guarded(_import_movi))
+
+    c = subparsers.add_parser("import-contactnets",
+                              help="import the DAIRLab ContactNets real cube tosses")
+    c.add_argument("directory", help="folder with params_processed/experiment.json and "
+                   "tosses_processed/*.pt")
+    c.add_argument("--out", required=True)
+    c.add_argument("--length-unit", type=float, default=None,
+                   help="metres per data unit (default: 9.81 / the file's g, the half-width)")
+    c.add_argument("--floor-half-size", type=float, default=2.0, help="floor plane half-size (m)")
+    c.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
+    c.set_defaults(func=_guarded(_import_contactnets))
+
+    ms = subparsers.add_parser("mit-standin", help="stand-in MIT Pushing raw files (MuJoCo pushes "
+                               "with per-push friction, tracking noise and pusher penetration)")
+    ms.add_argument("--out", required=True, help="folder for the raw .json pushes")
+    ms.add_argument("--num", type=int, default=120)
+    ms.add_argument("--seed", type=int, default=0)
+    ms.add_argument("--noise", type=float, default=5e-4, help="object tracking noise (m)")
+    ms.add_argument("--penetration", type=float, default=1e-3,
+                    help="how much thinner the simulated tip is than the imported scene's (m)")
+    ms.set_defaults(func=_guarded(_mit_standin))
+
+    sp = subparsers.add_parser("split", help="seeded train/valid/test split of a trajectory file")
+    sp.add_argument("data")
+    sp.add_argument("--out", required=True, help="folder for train.h5, valid.h5, test.h5, split.json")
+    sp.add_argument("--fractions", type=float, nargs=3, default=[0.6, 0.2, 0.2],
+                    metavar=("TRAIN", "VALID", "TEST"))
+    sp.add_argument("--seed", type=int, default=0)
+    sp.set_defaults(func=_guarded(_split))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -52,6 +52,8 @@ MAX_SPEED = 100.0
 #: Largest dataset (bytes) a trajectory field may declare: checked before reading, so a small
 #: corrupt file declaring gigabytes is refused instead of exhausting memory.
 MAX_FIELD_BYTES = 1 << 28
+#: Stored ``props`` may differ from their MJCF's by this much (relative, plus absolute; float32).
+PROPS_RTOL, PROPS_ATOL = 1e-4, 1e-5
 
 
 class TrajectoryFormatError(ValueError):
@@ -95,6 +97,7 @@ class Trajectory:
         metadata: free-form JSON-serialisable dict (source, seed, generator version, ...).
         extras: optional per-step arrays ``float[T, ...]`` (e.g. measured force).
         name: a label (file name of the source, or generator index).
+        source: the file it was read from (not stored; named in errors).
     """
 
     poses: np.ndarray
@@ -107,6 +110,7 @@ class Trajectory:
     metadata: dict[str, Any] = field(default_factory=dict)
     extras: dict[str, np.ndarray] = field(default_factory=dict)
     name: str = ""
+    source: str | None = field(default=None, compare=False)
 
     @property
     def num_steps(self) -> int:
@@ -130,18 +134,39 @@ class Trajectory:
 def build_scene(traj: Trajectory, mesh_options: MeshOptions | None = None) -> Scene:
     """Scene of a trajectory: from its MJCF if it has one, else from its meshes.
 
-    Checks that the rebuilt scene has the trajectory's objects (names and kinds, in order).
+    Checks that the rebuilt scene has the trajectory's objects (names and kinds, in order) and
+    properties (``props`` within :data:`PROPS_RTOL` of the MJCF's: the MJCF is what both
+    simulators use, so stored props that contradict it are an error, not silently ignored).
     """
     if traj.mjcf is not None:
         import mujoco
 
-        scene = Scene.from_mjmodel(mujoco.MjModel.from_xml_string(traj.mjcf), mesh_options)
+        where = _where(traj.source, traj.name, "mjcf")
+        try:
+            model = mujoco.MjModel.from_xml_string(traj.mjcf)
+        except ValueError as err:
+            raise TrajectoryFormatError(f"{where}: MuJoCo cannot compile it ({err})") from None
+        scene = Scene.from_mjmodel(model, mesh_options)
         if scene.object_names != tuple(traj.names) or scene.object_kind.tolist() != list(
                 np.asarray(traj.kinds).tolist()):
+            hint = ""
+            if len(traj.names) < scene.num_objects:
+                hint = (" (write every object of the MJCF, untracked static ones such as the floor "
+                        "included: fignet_gym.data.tracked.tracked_trajectory does)")
             raise TrajectoryFormatError(
-                f"{_where(None, traj.name, 'mjcf')}: its objects {scene.object_names} / kinds "
+                f"{where}: its objects {scene.object_names} / kinds "
                 f"{scene.object_kind.tolist()} differ from the stored names {tuple(traj.names)} / "
-                f"kinds {np.asarray(traj.kinds).tolist()}")
+                f"kinds {np.asarray(traj.kinds).tolist()}{hint}")
+        ref = scene.object_props.double().numpy()
+        props = np.asarray(traj.props, float)
+        bad = np.abs(props - ref) > PROPS_RTOL * np.abs(ref) + PROPS_ATOL
+        if bad.any():
+            o, j = (int(x) for x in np.argwhere(bad)[0])
+            label = ("mass", "friction", "restitution")[j]
+            raise TrajectoryFormatError(
+                f"{_where(traj.source, traj.name, 'props')}: object {traj.names[o]!r} has {label} "
+                f"{props[o, j]:.6g}, its MJCF gives {ref[o, j]:.6g} (props must be the MJCF's, "
+                "as Scene.from_mjmodel reads them)")
         return scene
     if traj.meshes is None:
         raise TrajectoryFormatError(f"{_where(None, traj.name)}: has neither 'mjcf' nor 'meshes'")
@@ -247,6 +272,10 @@ class TrajectoryWriter:
         if self._file is None:
             raise RuntimeError(f"{self.path}: writer is closed")
         validate_trajectory(traj, self.path)
+        if traj.mjcf is not None:  # objects, kinds and props against the MJCF, naming this file
+            from dataclasses import replace
+
+            build_scene(replace(traj, source=str(self.path)))
         g = self._group.create_group(f"{self.count:06d}")
         g.attrs["name"] = traj.name or f"{self.count:06d}"
         g.attrs["dt"] = float(traj.dt)
@@ -424,7 +453,7 @@ class TrajectoryFile:
             names=tuple(n.decode() if isinstance(n, bytes) else str(n) for n in names_raw),
             mjcf=mjcf, meshes=meshes,
             metadata=_read_json_attr(g, "metadata", where),
-            extras=extras, name=name,
+            extras=extras, name=name, source=str(self.path),
         )
         validate_trajectory(traj, self.path)
         return traj

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import weakref
 
 import mujoco
 import numpy as np
@@ -41,7 +40,9 @@ class MujocoDynamics(DynamicsBase):
     def __init__(self, nthread: int | None = None) -> None:
         self.nthread = int(nthread or os.cpu_count() or 1)
         self._pool: mujoco.rollout.Rollout | None = None
-        self._scratch: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+        # Scratch MjData of the last model rolled out. Not a WeakKeyDictionary: its MjData values
+        # hold their model, so no key was ever freed (a fit over 500 models grew to 16 GB).
+        self._scratch: tuple[mujoco.MjModel, list[mujoco.MjData]] | None = None
 
     def step(self, model: mujoco.MjModel, data: mujoco.MjData, nstep: int = 1) -> None:
         """``mujoco.mj_step(model, data, nstep)``; :class:`DivergenceError` if MuJoCo blew up."""
@@ -94,10 +95,9 @@ class MujocoDynamics(DynamicsBase):
 
         if self._pool is None:
             self._pool = mj_rollout.Rollout(nthread=self.nthread if self.nthread > 1 else 0)
-        datas = self._scratch.get(model)
-        if datas is None:
-            datas = [mujoco.MjData(model) for _ in range(max(self.nthread, 1))]
-            self._scratch[model] = datas
+        if self._scratch is None or self._scratch[0] is not model:
+            self._scratch = (model, [mujoco.MjData(model) for _ in range(max(self.nthread, 1))])
+        datas = self._scratch[1]
         fine = control
         if frame_skip > 1 and model.nmocap:
             start = np.empty((state.shape[0], control.shape[2]))

@@ -36,7 +36,8 @@ def ship(run: str, name: str, data: str, horizon: int, num: int = 64, dest: str 
                  "train_state": state, "heldout": {k: v for k, v in metrics.items()
                                                    if not k.endswith("_curve")}}
     sim.save(out / f"{name}.pt", meta={"model_card": json.dumps(card_meta)})
-    (out / f"{name}.md").write_text(model_card(name, sim, state, metrics, data, notes))
+    (out / f"{name}.md").write_text(model_card(name, sim, state, metrics, data, notes,
+                                               source=_data_source(data)))
     print(f"shipped {out / (name + '.pt')} ({(out / (name + '.pt')).stat().st_size / 1e6:.1f} MB)")
     return metrics
 
@@ -50,12 +51,27 @@ def _train_state(run_dir: Path, valid: dict[str, Any]) -> dict[str, Any]:
             "cpu_hours": valid.get("cpu_hours"), "training": cfg.get("training", {})}
 
 
+def _data_source(data: str) -> str:
+    """What the card says the data is: real tracked data is named by its importer's source."""
+    from fignet_gym.data.format import TrajectoryFile
+
+    with TrajectoryFile(data) as f:
+        source = str(f.metadata.get("source", ""))
+    if source == "contactnets":
+        return ("real tracked tosses of one cube (DAIRLab ContactNets, BSD-3-Clause; "
+                "`fignet-gym import-contactnets`)")
+    return ""
+
+
 def model_card(name: str, sim: LearnedSimulator, state: dict[str, Any], m: dict[str, Any],
-               data: str, notes: str) -> str:
-    """Markdown model card of a shipped simulator."""
+               data: str, notes: str, source: str = "") -> str:
+    """Markdown model card of a shipped simulator (``source``: what the data is, if not
+    MuJoCo-generated)."""
     c = sim.config
     n_params = sum(p.numel() for p in sim.parameters())
     tr = state.get("training", {})
+    generated = (f"MuJoCo-generated `{c.scene_type}` trajectories "
+                 "(`fignet-gym generate`, see `docs/data.md`)")
     return f"""# Pretrained simulator `{name}`
 
 Load with `fignet_gym.load_pretrained("{name}")` (offline; the file is in the package).
@@ -71,7 +87,7 @@ if c.rigid_output else "shape matched into poses in rollouts (as in the paper)"}
 Mesh options: {c.mesh_options}.
 
 ## Training
-- Data: MuJoCo-generated `{c.scene_type}` trajectories (`fignet-gym generate`, see `docs/data.md`).
+- Data: {source or generated}.
 - Budget: {state.get("steps")} optimiser steps of {tr.get("batch_size")} graphs
   ({state.get("graphs_seen")} graphs), {_fmt(state.get("cpu_hours"), 2)} CPU hours on a 2-core
   machine (one core per run).
@@ -86,7 +102,7 @@ Mesh options: {c.mesh_options}.
 {notes.rstrip()}
 
 ## Scores on held-out data (`{data}`, {m["trajectories"]} trajectories)
-Rollouts from the first {c.history + 1} true poses; errors after {m["horizon_step"]} steps
+Rollouts from the first {c.history + 1} true poses; errors at frame {m["horizon_step"]} counted from frame 0
 ({m["seconds"]:.2f} s), medians over trajectories.
 
 | model | translation RMSE (m) | rotation error (deg) |

@@ -1,0 +1,375 @@
+"""``fignet_gym/CubeToss-v0``: toss the real ContactNets cube so that it comes to rest at a target pose."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode
+
+from fignet_gym.dynamics import Dynamics
+from fignet_gym.envs.base import MjDynamicsEnv, add_disc, layout, layout_size
+from fignet_gym.envs.vector import BatchedVectorEnv
+from fignet_gym.mjcf import restitution_to_dampratio
+
+#: The ContactNets cube (``params_processed/experiment.json``, lengths in metres): half-width,
+#: mass (kg), principal inertia (kg m^2), nominal friction and restitution; the data's step (s).
+CUBE_HALF_WIDTH = 0.0524
+CUBE_MASS = 0.37
+CUBE_INERTIA = 0.2950002913583124 * CUBE_HALF_WIDTH**2
+NOMINAL_FRICTION, NOMINAL_RESTITUTION = 0.18, 0.125
+DATA_DT = 0.006756756756756757
+#: Floor half-size (m) of the imported data (``import-contactnets``' default): the learned
+#: model's floor mesh must be the one it was trained with.
+FLOOR_HALF_SIZE = 2.0
+
+#: MuJoCo parameters: ``source`` says where they come from. The nominal ones are the data's
+#: ``experiment.json`` with MuJoCo's defaults; ``fignet_gym/pretrained/cube-real.mujoco.json``
+#: (written by ``fignet-gym sim2real``'s fit) replaces them when present.
+NOMINAL_MUJOCO: dict[str, Any] = {
+    "source": "nominal (experiment.json friction and restitution, MuJoCo defaults otherwise)",
+    "friction": [NOMINAL_FRICTION, 0.005, 0.0001], "timeconst": 0.02,
+    "dampratio": restitution_to_dampratio(NOMINAL_RESTITUTION), "cone": "pyramidal",
+    "impratio": 1.0, "gravity": -9.81, "timestep": DATA_DT / 4,
+}
+MUJOCO_KEYS = set(NOMINAL_MUJOCO)
+
+
+def fitted_mujoco_path() -> Path:
+    """Where the fitted MuJoCo parameters of the cube are shipped (next to ``cube-real.pt``)."""
+    from fignet_gym.pretrained import pretrained_dir
+
+    return pretrained_dir() / "cube-real.mujoco.json"
+
+
+def mujoco_parameters(spec: str | os.PathLike | dict[str, Any] | None = None) -> dict[str, Any]:
+    """MuJoCo parameters of the cube scene: ``"nominal"``, ``"fitted"`` (the shipped fit; the
+    nominal ones, with a warning in ``source``, if none is shipped), a JSON file or a dict.
+
+    Keys (all optional, missing ones nominal): ``friction`` (one number or the three of MuJoCo's
+    ``friction``), ``timeconst`` (s) and ``dampratio`` (``solref``), ``cone`` (``"pyramidal"`` or
+    ``"elliptic"``), ``impratio``, ``gravity`` (m/s^2 along z), ``timestep`` (s, a divisor of
+    the data's step), ``source`` (text). Unknown keys raise ``ValueError``.
+    """
+    if spec is None or spec == "fitted":
+        path = fitted_mujoco_path()
+        if not path.is_file():
+            return {**NOMINAL_MUJOCO, "source": "NOMINAL: no fitted parameters shipped "
+                    f"({path.name} missing); " + NOMINAL_MUJOCO["source"]}
+        spec = path
+    if spec == "nominal":
+        return dict(NOMINAL_MUJOCO)
+    if isinstance(spec, (str, os.PathLike)):
+        try:
+            raw = json.loads(Path(spec).read_text())
+        except (OSError, json.JSONDecodeError) as err:
+            raise ValueError(f"{spec}: not a readable JSON file of MuJoCo parameters ({err})") from None
+        where = str(spec)
+    else:
+        raw, where = dict(spec), "mujoco parameters"
+    unknown = set(raw) - MUJOCO_KEYS
+    if unknown:
+        raise ValueError(f"{where}: unknown keys {sorted(unknown)} (known: {sorted(MUJOCO_KEYS)})")
+    out = {**NOMINAL_MUJOCO, "source": where, **raw}
+    fr = out["friction"]
+    out["friction"] = [float(fr), 0.005, 0.0001] if np.ndim(fr) == 0 else [float(x) for x in fr]
+    if len(out["friction"]) != 3 or out["cone"] not in ("pyramidal", "elliptic"):
+        raise ValueError(f"{where}: friction needs 1 or 3 numbers and cone 'pyramidal' or 'elliptic'")
+    ratio = DATA_DT / float(out["timestep"])
+    if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
+        raise ValueError(f"{where}: timestep {out['timestep']} s does not divide the data's step {DATA_DT} s")
+    return out
+
+
+def cube_toss_xml(params: dict[str, Any]) -> str:
+    """MJCF of the cube (free joint, box ``cube``) over the floor plane (the world body) with
+    MuJoCo parameters ``params`` (as :func:`mujoco_parameters` returns them)."""
+    h, fl = CUBE_HALF_WIDTH, FLOOR_HALF_SIZE
+    fr = " ".join(f"{x:.9g}" for x in params["friction"])
+    solref = f'{params["timeconst"]:.9g} {params["dampratio"]:.9g}'
+    return f"""<mujoco model="cube_toss">
+  <option timestep="{params['timestep']:.9g}" gravity="0 0 {params['gravity']:.9g}"
+          cone="{params['cone']}" impratio="{params['impratio']:.9g}"/>
+  <visual><global offwidth="640" offheight="640"/></visual>
+  <worldbody>
+    <light pos="0 0 3" dir="0 0 -1" directional="true"/>
+    <geom name="floor" type="plane" size="{fl} {fl} 0.05" rgba=".85 .85 .85 1"
+          friction="{fr}" solref="{solref}"/>
+    <body name="cube" pos="0 0 {2 * h:.9g}">
+      <freejoint name="cube"/>
+      <inertial pos="0 0 0" mass="{CUBE_MASS:.9g}"
+                diaginertia="{CUBE_INERTIA:.9g} {CUBE_INERTIA:.9g} {CUBE_INERTIA:.9g}"/>
+      <geom name="cube" type="box" size="{h:.9g} {h:.9g} {h:.9g}" friction="{fr}" solref="{solref}"
+            rgba=".8 .25 .2 1"/>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def resting_yaw(quat: np.ndarray) -> float:
+    """Heading (rad, in ``[-pi/4, pi/4)``) of a cube about the vertical, modulo its 90-degree
+    symmetry: the angle of whichever body axis lies most nearly horizontal-and-first, taken from
+    the two axes that are not the most vertical one. ``quat float[4]`` (w, x, y, z)."""
+    rot = np.empty(9)
+    mujoco.mju_quat2Mat(rot, np.asarray(quat, dtype=np.float64))
+    axes = rot.reshape(3, 3).T  # rows: body axes in world coordinates
+    up = int(np.argmax(np.abs(axes[:, 2])))
+    side = axes[(up + 1) % 3]
+    return float(wrap_quarter(math.atan2(side[1], side[0])))
+
+
+def wrap_quarter(a: float | np.ndarray) -> np.ndarray:
+    """Angle(s) modulo a quarter turn, in ``[-pi/4, pi/4)``."""
+    q = np.pi / 2
+    return (np.asarray(a) + q / 2) % q - q / 2
+
+
+def cube_toss_layout() -> dict[str, slice]:
+    """Observation layout of :class:`CubeTossEnv`."""
+    return layout(("tossed", 1), ("position", 3), ("quaternion", 4), ("target_rel_xy", 2),
+                  ("target_xy", 2), ("target_yaw", 2), ("yaw_error", 1))
+
+
+class CubeTossEnv(MjDynamicsEnv):
+    """Toss the real ContactNets cube (10.5 cm, 0.37 kg) so that it comes to rest at a target pose.
+
+    An episode is one toss. At reset the cube is held at ``release_position`` in a random
+    orientation and a target pose on the floor is drawn (a position ``target_distance`` from the
+    release point in any direction, and a heading). The action sets the release velocity and spin
+    within the range of the real rig's tosses (5th to 95th percentiles of the training tosses'
+    initial velocities: horizontal speed 1.0 to 1.27 m/s in any direction, vertical -0.4 to 0.13
+    m/s, spin up to about 4 rad/s); the cube then flies, lands, bounces, slides and comes to rest
+    during ``settle_steps`` learned steps of the data's 6.76 ms (1 s by default: the real tosses
+    stop within 0.8 s). ``dynamics="fignet"`` is the ``cube-real`` simulator learned from the
+    real tosses; ``dynamics="mujoco"`` is MuJoCo with the parameters fitted to the same tosses
+    (``mujoco_params``, see :func:`mujoco_parameters`; nominal ones, marked as such in
+    ``info["mujoco_source"]``, if no fit is shipped). The learned model always gets the
+    nominal scene it was trained with (its friction and restitution inputs are the data's).
+    The two agree to a few cm on where the cube comes to rest (tosses of ~0.4 m: median 4.2 cm,
+    worst 9.1 cm over 32 seeded random actions; the errors of each against held-out real tosses
+    are in ``fignet_gym/pretrained/cube-real.md``).
+
+    ## Action space
+
+    ``Box(-1, 1, (6,), float32)``, each entry mapped linearly to its range; out-of-range values
+    are clipped, NaN/inf raise ``ValueError``.
+
+    | index | action | unit |
+    |---|---|---|
+    | 0:1 | release heading (direction of horizontal velocity) | rad, ``[-pi, pi]`` |
+    | 1:2 | horizontal release speed | m/s, ``speed_range`` |
+    | 2:3 | vertical release velocity | m/s, ``vertical_range`` |
+    | 3:6 | spin (angular velocity, world x y z) | rad/s, ``spin_range`` per axis |
+
+    ## Observation space
+
+    ``Box(-inf, inf, (15,), float32)``; positions in metres, the cube's pose at release before the
+    toss and at rest after it.
+
+    | index | name | meaning |
+    |---|---|---|
+    | 0:1 | tossed | 0 before the toss, 1 after |
+    | 1:4 | position | cube centre (world, m) |
+    | 4:8 | quaternion | cube orientation (w, x, y, z) |
+    | 8:10 | target_rel_xy | cube xy minus target xy (m) |
+    | 10:12 | target_xy | target position on the floor (m) |
+    | 12:14 | target_yaw | cos and sin of 4 x the target heading (a cube looks the same every 90 degrees) |
+    | 14:15 | yaw_error | cube heading minus target heading, modulo 90 degrees (rad, ``[-pi/4, pi/4)``) |
+
+    ## Reward
+
+    The sum of these terms, each in ``info`` (``d``: xy distance of the resting cube from the
+    target; ``psi``: heading error modulo 90 degrees, rad):
+
+    | info key | term |
+    |---|---|
+    | reward_distance | ``-distance_weight * d`` |
+    | reward_yaw | ``-yaw_weight * abs(psi)`` |
+    | reward_success | ``success_bonus`` if ``d <= target_radius`` and ``abs(psi) <= yaw_tolerance`` |
+
+    ``info`` also holds ``distance`` (m), ``yaw_error_deg``, ``success``, ``speed`` (m/s at the
+    end: how nearly at rest the cube is), ``mujoco_source``; ``info["diverged"]`` names a
+    dynamics failure.
+
+    ## Episode end
+
+    Terminated after the toss (one step); truncated when the dynamics diverged.
+
+    ## Arguments
+
+    | argument | default | meaning |
+    |---|---|---|
+    | dynamics | ``"mujoco"`` | ``"mujoco"`` (fitted), ``"fignet"`` (``cube-real``) or a ``Dynamics`` object |
+    | checkpoint | ``None`` | ``"fignet"``: path, name or ``LearnedSimulator`` (default ``cube-real``) |
+    | mujoco_params | ``"fitted"`` | ``"fitted"``, ``"nominal"``, a JSON path or a dict |
+    | settle_steps | ``148`` | learned steps of 6.76 ms per toss (1 s) |
+    | release_position | ``(0.0, 0.0, 0.14)`` | where the cube is released (m; the rig's median height) |
+    | speed_range | ``(1.0, 1.27)`` | horizontal release speed at action -1 and +1 (m/s) |
+    | vertical_range | ``(-0.4, 0.13)`` | vertical release velocity range (m/s) |
+    | spin_range | ``(4.0, 4.0, 1.2)`` | largest spin about world x, y, z (rad/s, symmetric) |
+    | target_distance | ``(0.2, 0.45)`` | range of the target's distance from the release point (m) |
+    | target_radius | ``0.03`` | success radius (m) |
+    | yaw_tolerance | ``0.1745`` | success heading tolerance (rad, 10 degrees) |
+    | distance_weight | ``10.0`` | reward weight of the distance (1/m) |
+    | yaw_weight | ``1.0`` | reward weight of the heading error (1/rad) |
+    | success_bonus | ``1.0`` | reward of a success |
+    | render_mode | ``None`` | ``"rgb_array"`` or ``None`` |
+    | width | ``480`` | rendered frame width (px) |
+    | height | ``480`` | rendered frame height (px) |
+    | dynamics_kwargs | ``None`` | extra dynamics arguments (e.g. fignet's ``max_distance``) |
+    """
+
+    scene_type = "cube-real"
+
+    def __init__(
+        self,
+        dynamics: str | Dynamics = "mujoco",
+        checkpoint: Any = None,
+        mujoco_params: str | os.PathLike | dict[str, Any] = "fitted",
+        settle_steps: int = 148,
+        release_position: tuple[float, float, float] = (0.0, 0.0, 0.14),
+        speed_range: tuple[float, float] = (1.0, 1.27),
+        vertical_range: tuple[float, float] = (-0.4, 0.13),
+        spin_range: tuple[float, float, float] = (4.0, 4.0, 1.2),
+        target_distance: tuple[float, float] = (0.2, 0.45),
+        target_radius: float = 0.03,
+        yaw_tolerance: float = 0.1745,
+        distance_weight: float = 10.0,
+        yaw_weight: float = 1.0,
+        success_bonus: float = 1.0,
+        render_mode: str | None = None,
+        width: int = 480,
+        height: int = 480,
+        dynamics_kwargs: dict[str, Any] | None = None,
+    ) -> None:
+        if settle_steps < 1:
+            raise ValueError(f"settle_steps must be >= 1, got {settle_steps}")
+        self.settle_steps = int(settle_steps)
+        self.release_position = np.asarray(release_position, dtype=np.float64)
+        self.speed_range = np.asarray(speed_range, dtype=np.float64)
+        self.vertical_range = np.asarray(vertical_range, dtype=np.float64)
+        self.spin_range = np.asarray(spin_range, dtype=np.float64)
+        self.target_distance = np.asarray(target_distance, dtype=np.float64)
+        if (self.release_position.shape != (3,) or self.speed_range.shape != (2,)
+                or self.vertical_range.shape != (2,) or self.spin_range.shape != (3,)
+                or self.target_distance.shape != (2,)):
+            raise ValueError("release_position and spin_range need 3 entries; speed_range, "
+                             "vertical_range and target_distance 2")
+        if self.release_position[2] < CUBE_HALF_WIDTH * math.sqrt(3) + 1e-3:
+            raise ValueError(f"release_position z must clear the floor in any orientation "
+                             f"(> {CUBE_HALF_WIDTH * math.sqrt(3):.3f} m)")
+        self.target_radius, self.yaw_tolerance = float(target_radius), float(yaw_tolerance)
+        self.distance_weight, self.yaw_weight = float(distance_weight), float(yaw_weight)
+        self.success_bonus = float(success_bonus)
+        # The learned model sees the scene it was trained on (its props are input features);
+        # only MuJoCo gets the fitted contact parameters.
+        self.mujoco_params = mujoco_parameters(mujoco_params if dynamics == "mujoco" else "nominal")
+        model = mujoco.MjModel.from_xml_string(cube_toss_xml(self.mujoco_params))
+        per_step = round(DATA_DT / model.opt.timestep)
+        self.observation_layout = cube_toss_layout()
+        self.action_space = spaces.Box(-1.0, 1.0, (6,), np.float32)
+        self.observation_space = spaces.Box(
+            -np.inf, np.inf, (layout_size(self.observation_layout),), np.float32)
+        super().__init__(model, dynamics, checkpoint, per_step * self.settle_steps, render_mode,
+                         width, height, dynamics_kwargs)
+
+    def _init_state(self) -> None:
+        super()._init_state()
+        self.target = np.zeros(2)
+        self.target_yaw = 0.0
+        self.tossed = False
+
+    # ----------------------------------------------------------------- task
+    def _reset_task(self, rng: np.random.Generator, options: dict[str, Any] | None) -> None:
+        angle = rng.uniform(-np.pi, np.pi)
+        dist = rng.uniform(*self.target_distance)
+        self.target = self.release_position[:2] + dist * np.array([np.cos(angle), np.sin(angle)])
+        self.target_yaw = float(rng.uniform(-np.pi / 4, np.pi / 4))
+        q = rng.normal(size=4)
+        self.data.qpos[:7] = (*self.release_position, *(q / np.linalg.norm(q)))
+        self.data.qvel[:] = 0.0
+        self.tossed = False
+
+    def release_velocity(self, action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World linear ``float[3]`` (m/s) and angular ``float[3]`` (rad/s) velocity of an action."""
+        u = (np.asarray(action, dtype=np.float64) + 1) / 2  # [0, 1]
+        heading = -np.pi + 2 * np.pi * u[0]
+        speed = self.speed_range[0] + u[1] * (self.speed_range[1] - self.speed_range[0])
+        vz = self.vertical_range[0] + u[2] * (self.vertical_range[1] - self.vertical_range[0])
+        lin = np.array([speed * np.cos(heading), speed * np.sin(heading), vz])
+        return lin, (2 * u[3:] - 1) * self.spin_range
+
+    def _apply_action(self, action: np.ndarray) -> None:
+        if self.tossed:
+            raise RuntimeError(f"{type(self).__name__}: the cube was tossed; call reset()")
+        lin, ang = self.release_velocity(action)
+        rot = np.empty(9)
+        mujoco.mju_quat2Mat(rot, self.data.qpos[3:7])
+        # A free joint's angular velocity is in the body frame.
+        self.data.qvel[:6] = (*lin, *(rot.reshape(3, 3).T @ ang))
+        self.tossed = True
+
+    def _yaw_error(self) -> float:
+        return float(wrap_quarter(resting_yaw(self.data.qpos[3:7]) - self.target_yaw))
+
+    def _observe(self) -> np.ndarray:
+        lay = self.observation_layout
+        obs = np.zeros(layout_size(lay), dtype=np.float64)
+        obs[lay["tossed"]] = float(self.tossed)
+        obs[lay["position"]] = self.data.qpos[:3]
+        obs[lay["quaternion"]] = self.data.qpos[3:7]
+        obs[lay["target_rel_xy"]] = self.data.qpos[:2] - self.target
+        obs[lay["target_xy"]] = self.target
+        obs[lay["target_yaw"]] = (np.cos(4 * self.target_yaw), np.sin(4 * self.target_yaw))
+        obs[lay["yaw_error"]] = self._yaw_error()
+        return obs.astype(np.float32)
+
+    def _evaluate(self, action: np.ndarray) -> tuple[dict[str, float], bool, bool, dict[str, Any]]:
+        dist = float(np.linalg.norm(self.data.qpos[:2] - self.target))
+        psi = self._yaw_error()
+        success = dist <= self.target_radius and abs(psi) <= self.yaw_tolerance
+        terms = {"reward_distance": -self.distance_weight * dist,
+                 "reward_yaw": -self.yaw_weight * abs(psi),
+                 "reward_success": self.success_bonus * float(success)}
+        info = {"distance": dist, "yaw_error_deg": math.degrees(psi), "success": success,
+                "speed": float(np.linalg.norm(self.data.qvel[:3])),
+                "mujoco_source": self.mujoco_params["source"]}
+        return terms, True, False, info
+
+    def _camera(self) -> mujoco.MjvCamera:
+        cam = mujoco.MjvCamera()
+        cam.lookat[:] = (*self.release_position[:2], 0.05)
+        cam.distance, cam.azimuth, cam.elevation = 1.6, -135.0, -40.0
+        return cam
+
+    def _decorate(self, scene: mujoco.MjvScene) -> None:
+        add_disc(scene, (*self.target, 0.001), self.target_radius, (0.1, 0.8, 0.2, 0.5))
+
+
+class CubeTossVectorEnv(BatchedVectorEnv):
+    """``num_envs`` :class:`CubeTossEnv` stepped by one batched dynamics call.
+
+    The ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` entry point.
+
+    Args:
+        num_envs: number of sub-environments.
+        max_episode_steps: per-episode step limit (``None``: an episode is one toss).
+        autoreset_mode: Gymnasium ``AutoresetMode`` (default ``NEXT_STEP``).
+        kwargs: :class:`CubeTossEnv` arguments, shared by every sub-environment.
+    """
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        max_episode_steps: int | None = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(CubeTossEnv(**kwargs), num_envs, max_episode_steps, autoreset_mode)

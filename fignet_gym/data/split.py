@@ -1,0 +1,110 @@
+"""Seeded train / validation / test splits of a trajectory file (``fignet-gym split``).
+
+The split is stated, not implied: trajectory ``i`` of a file of ``n`` goes to the split its
+position takes in ``numpy.random.default_rng(seed).permutation(n)`` (the first
+``round(f_train n)`` positions train, the next ``round(f_valid n)`` validation, the rest test),
+and the chosen indices and names are written next to the split files (``split.json``). Training
+subsets of size ``k`` are the first ``k`` training trajectories of that order, so a smaller
+subset is always inside a larger one.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: Default fractions (train, validation, test).
+DEFAULT_FRACTIONS = (0.6, 0.2, 0.2)
+SPLITS = ("train", "valid", "test")
+
+
+class SplitError(ValueError):
+    """Too few trajectories for the requested split (the message names the file)."""
+
+
+@dataclass(frozen=True)
+class Split:
+    """Indices into a trajectory file. ``train`` is in the seeded order (subsets: its prefixes).
+
+    Attributes:
+        train, valid, test: trajectory indices. seed: the permutation's seed. fractions: as asked.
+        total: trajectories in the file.
+    """
+
+    train: tuple[int, ...]
+    valid: tuple[int, ...]
+    test: tuple[int, ...]
+    seed: int
+    fractions: tuple[float, float, float]
+    total: int
+
+    def subset(self, size: int | None) -> tuple[int, ...]:
+        """The first ``size`` training indices (all if ``None``); :class:`SplitError` if too few."""
+        if size is None:
+            return self.train
+        if not 1 <= size <= len(self.train):
+            raise SplitError(f"a training subset of {size} trajectories needs 1 to "
+                             f"{len(self.train)} (the training split has {len(self.train)})")
+        return self.train[:size]
+
+    def to_json(self) -> dict[str, Any]:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+
+def split_indices(n: int, fractions: Sequence[float] = DEFAULT_FRACTIONS, seed: int = 0,
+                  min_sizes: Sequence[int] = (1, 1, 1), where: str = "") -> Split:
+    """Seeded split of ``n`` trajectories into train / validation / test (see the module doc).
+
+    ``fractions``: three non-negative numbers summing to 1. ``min_sizes``: the fewest trajectories
+    each split may have; fewer raises :class:`SplitError` naming ``where`` (the file).
+    """
+    f = tuple(float(x) for x in fractions)
+    if len(f) != 3 or min(f) < 0 or abs(sum(f) - 1) > 1e-6:
+        raise SplitError(f"split fractions must be three non-negative numbers summing to 1, got {f}")
+    n_train = int(round(f[0] * n))
+    n_valid = int(round(f[1] * n))
+    n_test = n - n_train - n_valid
+    sizes = (n_train, n_valid, n_test)
+    short = [f"{s} ({k} < {m})" for s, k, m in zip(SPLITS, sizes, min_sizes, strict=True) if k < m]
+    if n_test < 0 or short:
+        need = sum(min_sizes)
+        raise SplitError(
+            f"{where or '<data>'}: {n} trajectories are too few for the split {f} "
+            f"(too small: {', '.join(short) or 'test'}; need at least {need} trajectories)")
+    order = np.random.default_rng(seed).permutation(n).tolist()
+    return Split(tuple(order[:n_train]), tuple(order[n_train:n_train + n_valid]),
+                 tuple(order[n_train + n_valid:]), int(seed), f, int(n))  # type: ignore[arg-type]
+
+
+def write_split(data: str | os.PathLike, out: str | os.PathLike,
+                fractions: Sequence[float] = DEFAULT_FRACTIONS, seed: int = 0,
+                min_sizes: Sequence[int] = (1, 1, 1)) -> dict[str, Path]:
+    """Write ``out/{train,valid,test}.h5`` and ``out/split.json`` from one trajectory file.
+
+    Returns the paths by split name (plus ``"json"``). The files are in split order (training
+    file: the seeded order, so ``train --max-train k`` takes :meth:`Split.subset` ``(k)``).
+    """
+    from fignet_gym.data.format import TrajectoryFile, TrajectoryWriter
+
+    out = Path(out)
+    with TrajectoryFile(data) as f:
+        split = split_indices(len(f), fractions, seed, min_sizes, where=str(data))
+        names = f.names
+        paths: dict[str, Path] = {}
+        for s in SPLITS:
+            paths[s] = out / f"{s}.h5"
+            with TrajectoryWriter(paths[s], {**f.metadata, "split": s, "split_seed": seed,
+                                             "split_of": str(data)}) as w:
+                for i in getattr(split, s):
+                    w.add(f[i])
+    info = {"data": str(data), **split.to_json(),
+            "names": {s: [names[i] for i in getattr(split, s)] for s in SPLITS}}
+    paths["json"] = out / "split.json"
+    paths["json"].write_text(json.dumps(info, indent=1))
+    return paths

@@ -1,0 +1,150 @@
+"""Training on small real data sets (tracked tosses): the gravity prior and one call per split.
+
+:func:`free_flight_gravity` measures the acceleration of free flight from the data itself (real
+rigs are not at 9.81 m/s^2 to the tracker: the ContactNets cube falls at 9.61 in its frame), and
+:func:`train_on_split` trains the ``cube-real`` recipe on the first ``size`` trajectories of a
+training file, selects its checkpoint on a validation file only, and resumes where a killed run
+stopped. ``fignet-gym sim2real`` calls it once per training-set size.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from fignet_gym.data.format import Trajectory, build_scene, load_trajectories
+
+#: Optimiser steps of ``cube-real`` by training-set size (the last entry for anything larger):
+#: a few tosses are learned (and overfitted) sooner, so small sets get fewer steps. Selection on
+#: validation picks the best checkpoint within them (see docs/experiments.md, Issue 14).
+DEFAULT_STEPS: tuple[tuple[int, int], ...] = ((8, 1200), (16, 1500), (32, 2000), (64, 3000),
+                                              (128, 4000), (10**9, 5000))
+
+
+class TrainingInterrupted(RuntimeError):
+    """A :func:`train_on_split` run was stopped (SIGINT / SIGTERM) before its last step."""
+
+
+def default_steps(size: int) -> int:
+    """Optimiser steps :func:`train_on_split` takes for ``size`` training trajectories."""
+    for limit, steps in DEFAULT_STEPS:
+        if size <= limit:
+            return steps
+    return DEFAULT_STEPS[-1][1]
+
+
+def free_flight_gravity(trajs: Sequence[Trajectory], clearance: float = 0.01, min_poses: int = 8
+                        ) -> float:
+    """Vertical acceleration (m/s^2, negative: down) of free flight, measured from poses.
+
+    For each trajectory, the first poses in which every dynamic node is more than ``clearance``
+    (m) above the floor plane ``z = 0`` (a toss before its first impact) are fitted with a
+    parabola in time for the dynamic objects' mean centre-of-mass height; the result is the median
+    over trajectories of ``2 a``. Trajectories with fewer than ``min_poses`` such poses are
+    skipped; ``ValueError`` if none is left.
+    """
+    fits = []
+    for traj in trajs:
+        scene = build_scene(traj)
+        dyn = scene.dynamic_mask
+        poses = torch.as_tensor(traj.poses, dtype=torch.float32)
+        low = scene.node_positions(poses)[:, dyn[scene.node_object], 2].amin(dim=1)  # [T]
+        touching = (low <= clearance).nonzero()
+        n = int(touching[0, 0]) if touching.numel() else poses.shape[0]
+        if n < min_poses:
+            continue
+        z = scene.com_positions(poses[:n])[:, dyn, 2].mean(dim=1).double().numpy()
+        t = np.arange(n) * traj.dt
+        fits.append(2.0 * np.polyfit(t, z, 2)[0])
+    if not fits:
+        raise ValueError(f"no trajectory has {min_poses} poses of free flight (every dynamic node "
+                         f"more than {clearance} m above z = 0) to measure gravity from")
+    return float(np.median(fits))
+
+
+def _trajectories(spec: str | os.PathLike | Sequence[Trajectory], what: str) -> list[Trajectory]:
+    if isinstance(spec, (str, os.PathLike)):
+        return load_trajectories(spec)
+    trajs = list(spec)
+    if not trajs or not all(isinstance(t, Trajectory) for t in trajs):
+        raise TypeError(f"{what}: expected a trajectory file or a non-empty list of Trajectory")
+    return trajs
+
+
+def train_on_split(
+    train: str | os.PathLike | Sequence[Trajectory],
+    valid: str | os.PathLike | Sequence[Trajectory],
+    size: int | None,
+    out_dir: str | os.PathLike,
+    budget: int | None = None,
+    *,
+    config: str = "cube-real",
+    overrides: dict[str, Any] | None = None,
+    seed: int = 0,
+) -> Path:
+    """Train a simulator on the first ``size`` training trajectories; return its best checkpoint.
+
+    Args:
+        train: training trajectories (a file or a list) in the split's order, so that size ``k``
+            is the split's subset ``k`` (``fignet_gym.data.split.Split.subset``).
+        valid: validation trajectories: checkpoints are selected on these only (never on test).
+        size: how many training trajectories to use (``None``: all).
+        out_dir: run folder (``best.pt``, ``last.pt``, ``curve.jsonl``, ``config.json``,
+            ``split.json``). A run already there is resumed, a finished one returned as is.
+        budget: optimiser steps (``None``: :func:`default_steps` of the size).
+        config: preset or JSON config file (default ``cube-real``); ``overrides`` as for
+            ``fignet-gym train --set``.
+        seed: seed of initialisation, sampling and noise.
+
+    Raises :class:`TrainingInterrupted` if the run was stopped before its last step (its
+    ``last.pt`` is written: calling again resumes it exactly).
+
+    The gravity prior is measured on the training subset (:func:`free_flight_gravity`) unless
+    ``overrides`` sets ``simulator.gravity``. Returns ``out_dir / "best.pt"``.
+    """
+    from fignet_gym.train.training import Trainer, load_run_config
+
+    trajs = _trajectories(train, "train")
+    valid_trajs = _trajectories(valid, "valid")
+    if size is not None:
+        if not 1 <= size <= len(trajs):
+            raise ValueError(f"train: a subset of {size} trajectories needs 1 to {len(trajs)}")
+        trajs = trajs[:size]
+    out = Path(out_dir)
+    best = out / "best.pt"
+    done = out / "done.json"
+    if done.is_file() and best.is_file():
+        return best
+    sets: dict[str, Any] = dict(overrides or {})
+    sets.setdefault("training.seed", seed)
+    sets.setdefault("training.threads", 1)
+    steps = int(budget) if budget is not None else default_steps(len(trajs))
+    sets.setdefault("training.steps", steps)
+    # Validate ~12 times per run whatever its length: early stopping needs points to choose
+    # from, and a validation (80 full-length rollouts plus one-step errors) costs about as much
+    # CPU as 500 training steps.
+    sets.setdefault("training.valid_every", max(100, steps // 12))
+    if "simulator.gravity" not in sets:
+        sets["simulator.gravity"] = (0.0, 0.0, free_flight_gravity(trajs))
+    sim_cfg, cfg = load_run_config(config, sets)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "split.json").write_text(json.dumps(
+        {"train": [t.name for t in trajs], "valid": [t.name for t in valid_trajs],
+         "gravity": list(sim_cfg["gravity"]), "steps": cfg.steps}, indent=1))
+    trainer = Trainer(sim_cfg, cfg, trajs, valid_trajs, out, resume=True)
+    state = trainer.run()
+    if state.step < cfg.steps:  # SIGINT / SIGTERM: last.pt is written, a new call resumes
+        raise TrainingInterrupted(f"{out}: training interrupted at step {state.step} of "
+                                  f"{cfg.steps}; call again to resume")
+    if not best.is_file() or not math.isfinite(state.best_error):
+        raise RuntimeError(f"{out}: no finite validation score: the run diverged")
+    done.write_text(json.dumps({"step": state.step, "cpu_hours": state.cpu_seconds / 3600,
+                                "best_score": state.best_error}))
+    return best

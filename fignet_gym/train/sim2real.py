@@ -1,0 +1,316 @@
+"""``fignet-gym sim2real``: nominal MuJoCo, fitted MuJoCo and FIGNet at several training-set sizes
+on one real (or stand-in) trajectory file, scored on a held-out split.
+
+Stages, each written to ``OUT`` as it finishes (``--resume`` skips finished ones; a killed FIGNet
+run resumes from its last checkpoint):
+
+1. ``split/``: seeded train / validation / test files (:func:`~fignet_gym.data.split.write_split`).
+2. ``mujoco_nominal.json``: MuJoCo with the MJCF's own parameters replaying the test split.
+3. ``mujoco_fit.json``: contact parameters fitted on training, selected on validation
+   (:func:`~fignet_gym.train.sysid.fit_contact_params`); ``mujoco_fitted_env.json`` is the same in
+   the ``CubeToss-v0`` env's form. ``mujoco_fitted.json``: the fitted MuJoCo on test.
+4. ``fignet_<size>/``: a FIGNet run on the first ``size`` training trajectories (the training
+   step is :func:`default_train`, a call to ``fignet_gym.train.real.train_on_split``; any callable
+   ``(train_file, valid_file, size, out_dir) -> checkpoint`` can replace it), and
+   ``fignet_<size>.json``: its test metrics, with paired bootstrap ratios to fitted MuJoCo.
+5. ``results.json``, ``table.md`` and ``errors_vs_size.png``.
+
+Errors: median translation RMSE and rotation error over test trajectories at frame ``horizon``
+counted from frame 0 (50: 0.34 s on the cube data) and at each trajectory's last frame, each also
+as a fraction of the no-motion model's (the paper's Fig. 7c unit). Every model is given the same
+first ``history + 1`` poses.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from fignet_gym.data.split import DEFAULT_FRACTIONS, write_split
+
+TrainFn = Callable[[Path, Path, "int | None", Path], Path]
+#: Columns of the table: (key prefix, heading).
+_QUANTITIES = (("translation_rmse_final", "transl. @h (mm)"), ("rotation_deg_final", "rot. @h (deg)"),
+               ("translation_rmse_last", "transl. last (mm)"), ("rotation_deg_last", "rot. last (deg)"))
+
+
+class Sim2RealError(ValueError):
+    """A user error of ``sim2real`` (the message names the file or folder)."""
+
+
+def default_train(config: str = "cube-real", budget: int | None = None,
+                  overrides: dict[str, Any] | None = None, init: str | None = None) -> TrainFn:
+    """The FIGNet training step: h14learn's recipe, ``train_on_split`` (``config``, ``budget``
+    optimiser steps or its size-dependent default), or a warm start from ``init`` (a checkpoint
+    or pretrained name) with the same selection on validation."""
+
+    def train(train_file: Path, valid_file: Path, size: int | None, out_dir: Path) -> Path:
+        from fignet_gym.train.real import train_on_split
+
+        if init is None:
+            return train_on_split(train_file, valid_file, size, out_dir, budget, config=config,
+                                  overrides=overrides)
+        return _train_from(init, train_file, valid_file, size, out_dir, config, budget, overrides)
+
+    return train
+
+
+def _train_from(init: str, train_file: Path, valid_file: Path, size: int | None, out_dir: Path,
+                config: str, budget: int | None, overrides: dict[str, Any] | None) -> Path:
+    """Fine-tune ``init`` on the first ``size`` training trajectories (resumable)."""
+    from fignet_gym.data.format import load_trajectories
+    from fignet_gym.train.real import default_steps
+    from fignet_gym.train.training import Trainer, load_run_config
+
+    trajs = load_trajectories(train_file)
+    trajs = trajs[:size] if size is not None else trajs
+    best, done = out_dir / "best.pt", out_dir / "done.json"
+    if done.is_file() and best.is_file():
+        return best
+    sets = {"training.threads": 1, **(overrides or {})}
+    steps = int(budget or default_steps(len(trajs)))
+    sets.setdefault("training.steps", steps)
+    sets.setdefault("training.valid_every", max(25, steps // 12))
+    sim_cfg, cfg = load_run_config(config, sets)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    resume = (out_dir / "last.pt").is_file()
+    trainer = Trainer(sim_cfg, cfg, trajs, load_trajectories(valid_file), out_dir, resume=resume,
+                      init=None if resume else init)
+    state = trainer.run()
+    if state.step >= cfg.steps and best.is_file():
+        done.write_text(json.dumps({"step": state.step, "cpu_hours": state.cpu_seconds / 3600}))
+    return best
+
+
+def _read(path: Path) -> dict[str, Any] | None:
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def _write(path: Path, obj: dict[str, Any]) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(obj, indent=1, default=float))
+    os.replace(tmp, path)
+
+
+def _size_label(size: int | None) -> str:
+    return "all" if size is None else str(size)
+
+
+def parse_sizes(values: Sequence[str]) -> list[int | None]:
+    """``["8", "16", "all"]`` -> ``[8, 16, None]``; :class:`Sim2RealError` on anything else."""
+    out: list[int | None] = []
+    for v in values:
+        if str(v).lower() == "all":
+            out.append(None)
+        else:
+            try:
+                n = int(v)
+            except ValueError:
+                raise Sim2RealError(f"--sizes: {v!r} is not a number or 'all'") from None
+            if n < 1:
+                raise Sim2RealError(f"--sizes: {n} must be at least 1")
+            out.append(n)
+    return out
+
+
+def _mujoco_metrics(trajs: list, params: Any, given: int, horizon: int) -> dict[str, Any]:
+    from fignet_gym.train.evaluation import predictor_metrics
+    from fignet_gym.train.sysid import ReplaySet
+
+    rs = ReplaySet(trajs, given, horizon)
+    t0 = time.process_time()
+    preds = rs.predict(params)
+    out = predictor_metrics(trajs, preds, given, horizon)
+    out["cpu_seconds"] = time.process_time() - t0
+    out["params"] = params.to_json()
+    return out
+
+
+def run_sim2real(
+    data: str | os.PathLike, out: str | os.PathLike, sizes: Sequence[int | None] = (8, 16, 32, 64, 128, None),
+    *, fractions: Sequence[float] = DEFAULT_FRACTIONS, seed: int = 0, horizon: int = 50,
+    given: int = 3, resume: bool = False, fit_evaluations: int = 240, fit_trajectories: int = 64,
+    train_fn: TrainFn | None = None, fignet: bool = True, base_params: Any = None,
+) -> dict[str, Any]:
+    """Run every stage (see the module docstring) and return the results dict."""
+    from fignet_gym.data.format import load_trajectories
+    from fignet_gym.train.analytic import ContactParams
+    from fignet_gym.train.evaluation import paired_ratios, rollout_metrics
+    from fignet_gym.train.sysid import env_parameters, fit_contact_params
+
+    out = Path(out)
+    results_path = out / "results.json"
+    if out.exists() and any(out.iterdir()) and not resume:
+        raise Sim2RealError(f"{out}: already holds a sim2real run (pass --resume to continue it, "
+                            "or choose another --out)")
+    out.mkdir(parents=True, exist_ok=True)
+    config_path = out / "run.json"
+    run_cfg = {"data": str(data), "fractions": list(fractions), "seed": seed, "horizon": horizon,
+               "given_poses": given, "fit_evaluations": fit_evaluations,
+               "fit_trajectories": fit_trajectories}
+    old = _read(config_path)
+    if old is not None and {k: old.get(k) for k in run_cfg} != run_cfg:
+        raise Sim2RealError(f"{config_path}: this run was started with {old}, not {run_cfg}: "
+                            "resume it with the same options or use another --out")
+    _write(config_path, run_cfg)
+
+    split_dir = out / "split"
+    if not (split_dir / "split.json").is_file():
+        write_split(data, split_dir, fractions, seed)
+    split = json.loads((split_dir / "split.json").read_text())
+    n_train = len(split["train"])
+    for s in sizes if fignet else ():
+        if s is not None and s > n_train:
+            raise Sim2RealError(f"{data}: training-set size {s} exceeds the training split's "
+                                f"{n_train} trajectories")
+    train = load_trajectories(split_dir / "train.h5")
+    valid = load_trajectories(split_dir / "valid.h5")
+    test = load_trajectories(split_dir / "test.h5")
+    stages: dict[str, Any] = {"split": {k: len(split[k]) for k in ("train", "valid", "test")}}
+
+    base = base_params or ContactParams()
+    nominal = _read(out / "mujoco_nominal.json")
+    if nominal is None:
+        print("nominal MuJoCo on the test split ...")
+        nominal = _mujoco_metrics(test, base, given, horizon)
+        _write(out / "mujoco_nominal.json", nominal)
+    fit = fit_contact_params(train, valid, out / "mujoco_fit.json", base=base,
+                             evaluations=fit_evaluations, fit_trajectories=fit_trajectories,
+                             given=given, horizon=horizon, seed=seed)
+    fitted_params = ContactParams.from_json(fit["params"])
+    _write(out / "mujoco_fitted_env.json",
+           env_parameters(fitted_params, test[0].dt, f"sim2real fit on {Path(data).name} "
+                          f"(seed {seed}, {n_train} training trajectories)"))
+    fitted = _read(out / "mujoco_fitted.json")
+    if fitted is None:
+        print("fitted MuJoCo on the test split ...")
+        fitted = _mujoco_metrics(test, fitted_params, given, horizon)
+        _write(out / "mujoco_fitted.json", fitted)
+
+    learned: dict[str, Any] = {}
+    if fignet:
+        train_fn = train_fn or default_train()
+        for size in sizes:
+            label = _size_label(size)
+            path = out / f"fignet_{label}.json"
+            res = _read(path)
+            if res is None:
+                print(f"FIGNet on {label} training trajectories ...")
+                ckpt = train_fn(split_dir / "train.h5", split_dir / "valid.h5", size,
+                                out / f"fignet_{label}")
+                from fignet_gym.pretrained import load_checkpoint
+
+                sim = load_checkpoint(str(ckpt))
+                if sim.config.history + 1 != given:
+                    raise Sim2RealError(f"{ckpt}: the model takes {sim.config.history + 1} poses, "
+                                        f"the MuJoCo baselines {given}: scores would not compare")
+                res = rollout_metrics(sim, test, horizon=horizon)
+                res["checkpoint"] = str(ckpt)
+                res["training_trajectories"] = size if size is not None else n_train
+                res["vs_fitted_mujoco"] = paired_ratios(res, fitted)
+                _write(path, res)
+            learned[label] = res
+    results = {"run": run_cfg, **stages, "fit": {k: fit[k] for k in ("params", "valid", "cpu_seconds")},
+               "mujoco_nominal": _headline(nominal), "mujoco_fitted": _headline(fitted),
+               "no_motion": _headline(fitted, prefix="still_"),
+               "fignet": {k: {**_headline(v), "training_trajectories": v["training_trajectories"],
+                              "vs_fitted_mujoco": v["vs_fitted_mujoco"]} for k, v in learned.items()}}
+    _write(results_path, results)
+    table = format_table(results)
+    (out / "table.md").write_text(table + "\n")
+    plot_sizes(results, out / "errors_vs_size.png")
+    print(table)
+    print(f"wrote {results_path}, {out / 'table.md'}, {out / 'errors_vs_size.png'}")
+    return results
+
+
+def _headline(res: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, _ in _QUANTITIES:
+        out[key] = res[prefix + key]
+        q, at = key.rsplit("_", 1)
+        suffix = "" if at == "final" else "_last"
+        ratio = res.get(f"{q}{suffix}_ratio_still") if not prefix else 1.0
+        out[f"{key}_ratio_still"] = ratio
+    out["horizon_step"] = res["horizon_step"]
+    out["trajectories"] = res["trajectories"]
+    return out
+
+
+def format_table(results: dict[str, Any]) -> str:
+    """Markdown table of the headline errors (and % of no motion) of every model."""
+    h = results["mujoco_fitted"]["horizon_step"]
+    n = results["mujoco_fitted"]["trajectories"]
+    head = ["model"] + [f"{name.replace('@h', f'@{h}')}" for _, name in _QUANTITIES]
+    lines = [f"Test split: {n} trajectories; medians at frame {h} (from frame 0) and at each "
+             "trajectory's last frame; (x%) = fraction of the no-motion model's error.", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+
+    def row(label: str, r: dict[str, Any]) -> str:
+        cells = []
+        for key, _ in _QUANTITIES:
+            v = r[key] * (1000 if key.startswith("translation") else 1)
+            ratio = r.get(f"{key}_ratio_still")
+            cells.append(f"{v:.1f} ({100 * ratio:.0f}%)" if ratio is not None and math.isfinite(ratio)
+                         else f"{v:.1f}")
+        return f"| {label} | " + " | ".join(cells) + " |"
+
+    lines.append(row("no motion", results["no_motion"]))
+    lines.append(row("MuJoCo, nominal", results["mujoco_nominal"]))
+    lines.append(row("MuJoCo, fitted", results["mujoco_fitted"]))
+    for r in results["fignet"].values():
+        lines.append(row(f"FIGNet, {r['training_trajectories']} train", r))
+    if results["fignet"]:
+        lines += ["", "FIGNet / fitted MuJoCo, ratio of medians on the same test trajectories "
+                  "(paired bootstrap 95% interval):", "",
+                  "| training trajectories | transl. @h | rot. @h | transl. last | rot. last |",
+                  "|---|---|---|---|---|"]
+        for r in results["fignet"].values():
+            v = r["vs_fitted_mujoco"]
+            cells = [f"{v[k][0]:.2f} [{v[k][1]:.2f}, {v[k][2]:.2f}]"
+                     for k in ("translation_rmse", "rotation_deg", "translation_rmse_last",
+                               "rotation_deg_last")]
+            lines.append(f"| {r['training_trajectories']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def plot_sizes(results: dict[str, Any], path: Path) -> None:
+    """Errors (% of no motion) against training-set size: FIGNet points, MuJoCo lines."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 4, figsize=(15, 3.4))
+    fg = sorted(results["fignet"].values(), key=lambda r: r["training_trajectories"])
+    for ax, (key, name) in zip(axes, _QUANTITIES, strict=True):
+        k = f"{key}_ratio_still"
+        if fg:
+            ax.plot([r["training_trajectories"] for r in fg], [100 * r[k] for r in fg], "o-",
+                    label="FIGNet")
+        for label, style in (("mujoco_fitted", "--"), ("mujoco_nominal", ":")):
+            ax.axhline(100 * results[label][k], linestyle=style, color="k" if "fit" in label else "gray",
+                       label=label.replace("mujoco_", "MuJoCo, "))
+        ax.set(xscale="log", xlabel="training trajectories", title=name.replace(
+            "@h", f"@{results['mujoco_fitted']['horizon_step']}"), ylabel="% of no motion")
+        ax.grid(alpha=0.3, which="both")
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def summary_lines(results: dict[str, Any]) -> list[str]:
+    """Short text of the fit (for logs)."""
+    p = results["fit"]["params"]
+    text = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.items())
+    return [f"fitted MuJoCo: {text}"]
+
+
+__all__ = ["Sim2RealError", "default_train", "format_table", "parse_sizes", "plot_sizes",
+           "run_sim2real", "summary_lines"]

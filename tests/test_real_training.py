@@ -1,0 +1,124 @@
+"""Training on real-data splits: the measured gravity prior, train_on_split, --init by name."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+import torch
+
+from fignet_gym.data.format import Trajectory, write_trajectories
+from fignet_gym.envs.cube_toss import DATA_DT, cube_toss_xml, mujoco_parameters
+from fignet_gym.pretrained import load_pretrained
+from fignet_gym.simulator.scene import Scene
+from fignet_gym.train.real import (
+    TrainingInterrupted,
+    default_steps,
+    free_flight_gravity,
+    train_on_split,
+)
+from fignet_gym.train.training import Trainer, load_run_config
+
+TINY = {"simulator.latent_size": 8, "simulator.message_passing_steps": 1,
+        "training.batch_size": 2, "training.valid_trajectories": 2, "training.valid_horizon": 20}
+
+
+def cube_tosses(n: int, gravity: float, poses: int = 40, seed: int = 0) -> list[Trajectory]:
+    """MuJoCo tosses of the ContactNets cube (nominal contact) under ``gravity`` (m/s^2)."""
+    params = {**mujoco_parameters("nominal"), "gravity": gravity}
+    xml = cube_toss_xml(params)
+    model = mujoco.MjModel.from_xml_string(xml)
+    scene = Scene.from_mjmodel(model)
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        data = mujoco.MjData(model)
+        q = rng.normal(size=4)
+        data.qpos[:7] = (*rng.uniform(-0.2, 0.2, 2), rng.uniform(0.13, 0.17), *(q / np.linalg.norm(q)))
+        data.qvel[:6] = (*rng.uniform(-1, 1, 2), 0.0, *rng.uniform(-3, 3, 3))
+        mujoco.mj_forward(model, data)
+        track = np.empty((poses, scene.num_objects, 7))
+        for k in range(poses):
+            if k:
+                mujoco.mj_step(model, data, nstep=4)
+            track[k] = scene.poses_from_data(data)
+        out.append(Trajectory(poses=track.astype(np.float32), dt=DATA_DT,
+                              kinds=scene.object_kind.numpy(), props=scene.object_props.double().numpy(),
+                              names=scene.object_names, mjcf=xml, name=f"toss-{i}"))
+    return out
+
+
+def test_free_flight_gravity_measures_the_simulated_gravity() -> None:
+    # MuJoCo's semi-implicit Euler moves a free body on an exact parabola in time.
+    assert free_flight_gravity(cube_tosses(4, -9.6)) == pytest.approx(-9.6, abs=0.01)
+    assert free_flight_gravity(cube_tosses(4, -9.81)) == pytest.approx(-9.81, abs=0.01)
+    landed = cube_tosses(1, -9.6)[0]
+    landed.poses = landed.poses[-5:]  # at rest on the floor: no free flight to fit
+    with pytest.raises(ValueError, match="free flight"):
+        free_flight_gravity([landed])
+
+
+def test_smaller_training_sets_get_fewer_steps() -> None:
+    sizes = [8, 16, 32, 64, 128, 240]
+    steps = [default_steps(s) for s in sizes]
+    assert steps == sorted(steps) and steps[0] < steps[-1]
+
+
+def test_train_on_split_subsets_measures_gravity_and_resumes(tmp_path: Path,
+                                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    trajs = cube_tosses(4, -9.6)
+    train_file = tmp_path / "train.h5"
+    write_trajectories(train_file, trajs[:3])
+    out = tmp_path / "run"
+    # First call killed after 2 of its 4 steps (as an interruption would stop it).
+    original = Trainer.run
+    monkeypatch.setattr(Trainer, "run", lambda self, stop_after=None: original(self, stop_after=2))
+    with pytest.raises(TrainingInterrupted, match="interrupted at step 2 of 4"):
+        train_on_split(train_file, trajs[3:], 2, out, budget=4, overrides=TINY)
+    assert torch.load(out / "last.pt", weights_only=True)["meta"]["train_state"]["step"] == 2
+    monkeypatch.setattr(Trainer, "run", original)
+    best = train_on_split(train_file, trajs[3:], 2, out, budget=4, overrides=TINY)
+    assert best == out / "best.pt" and best.is_file()
+    info = json.loads((out / "split.json").read_text())
+    assert info["train"] == ["toss-0", "toss-1"] and info["valid"] == ["toss-3"]
+    assert info["gravity"][2] == pytest.approx(-9.6, abs=0.01)
+    config = json.loads((out / "config.json").read_text())
+    assert config["simulator"]["gravity"][2] == pytest.approx(-9.6, abs=0.01)
+    assert config["simulator"]["dt"] == DATA_DT  # the data's own, not rounded
+    assert json.loads((out / "done.json").read_text())["step"] == 4
+    # A finished run is returned as is, not trained again.
+    stamp = (out / "last.pt").stat().st_mtime_ns
+    assert train_on_split(train_file, trajs[3:], 2, out, budget=4, overrides=TINY) == best
+    assert (out / "last.pt").stat().st_mtime_ns == stamp
+    with pytest.raises(ValueError, match="subset of 9"):
+        train_on_split(train_file, trajs[3:], 9, tmp_path / "x", budget=4, overrides=TINY)
+
+
+def test_init_accepts_a_pretrained_name(tmp_path: Path) -> None:
+    source = load_pretrained("toss")
+    sim_cfg = {k: v for k, v in source.config.to_dict().items() if k not in ("dt", "noise_std")}
+    from fignet_gym.data.generate import iter_trajectories
+
+    trajs = list(iter_trajectories("toss-simple", 2, seed=3))
+    _, cfg = load_run_config(None, {"training.steps": 1, "training.threads": 1})
+    trainer = Trainer(sim_cfg, cfg, trajs[:1], trajs[1:], tmp_path / "ft", init="toss")
+    for (name, a), b in zip(source.state_dict().items(), trainer.sim.state_dict().values(), strict=True):
+        assert torch.equal(a, b), name
+
+
+def test_cli_init_with_an_unknown_name_is_one_error_line(tmp_path: Path) -> None:
+    data = tmp_path / "t.h5"
+    write_trajectories(data, cube_tosses(2, -9.6, poses=12))
+    cmd = [sys.executable, "-m", "fignet_gym", "train", "--data", str(data), "--config", "cube-real",
+           "--out", str(tmp_path / "r"), "--init", "no-such-model", "--set", json.dumps(TINY)]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2
+    lines = done.stderr.strip().splitlines()
+    assert lines[-1].startswith("error: no-such-model") and "toss" in lines[-1]
+    assert "Traceback" not in done.stderr
+

@@ -1,0 +1,221 @@
+"""MuJoCo replay of trajectory files, system identification, and the sim2real command."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from fignet_gym.cli import main
+from fignet_gym.data.format import load_trajectories
+from fignet_gym.data.generate import iter_trajectories
+from fignet_gym.data.tracked import import_contactnets, tracked_trajectory
+from fignet_gym.dynamics.mujoco import MujocoDynamics
+from fignet_gym.mjcf import cube_scene_xml
+from fignet_gym.train.analytic import ContactParams, Replay, finite_difference_state
+from fignet_gym.train.sysid import DEFAULT_SPACE, Dimension, ReplaySet, fit_contact_params, replay_loss
+
+SAMPLE = Path(__file__).parent / "data" / "contactnets_sample"
+DT = 1 / 148
+
+
+def _quat_about(axis: np.ndarray, angle: float) -> np.ndarray:
+    axis = axis / np.linalg.norm(axis)
+    return np.concatenate([[math.cos(angle / 2)], math.sin(angle / 2) * axis])
+
+
+def test_finite_differences_are_exact_for_free_flight() -> None:
+    """Uniform acceleration and a constant spin: central differences give the state exactly."""
+    v0, g, axis, rate = np.array([0.3, -0.2, 1.0]), np.array([0, 0, -9.81]), np.array([1.0, 2, 3]), 7.0
+    q0 = _quat_about(np.array([0.0, 1, 0]), 0.4)
+    poses = np.zeros((3, 1, 7))
+    for k in range(3):
+        t = k * DT
+        poses[k, 0, :3] = v0 * t + 0.5 * g * t**2
+        dq = np.empty(4)
+        mujoco.mju_mulQuat(dq, _quat_about(axis, rate * t), q0)
+        poses[k, 0, 3:] = dq
+    k, qvel = finite_difference_state(poses, DT)
+    assert k == 1
+    np.testing.assert_allclose(qvel[0, :3], v0 + g * DT, atol=1e-9)
+    rot = np.empty(9)
+    mujoco.mju_quat2Mat(rot, poses[1, 0, 3:])
+    w_world = rate * axis / np.linalg.norm(axis)
+    np.testing.assert_allclose(qvel[0, 3:], rot.reshape(3, 3).T @ w_world, atol=1e-9)
+
+
+def test_replay_of_generated_pushes_reproduces_them() -> None:
+    """MuJoCo itself is the oracle: replaying a generated push with its own MJCF and substeps
+    (objects at rest for the first poses, the tip on its recorded path) gives back its poses."""
+    dyn = MujocoDynamics(nthread=1)
+    for t in iter_trajectories("push", 2, seed=5):
+        pred = Replay(t).rollout(ContactParams(substeps=t.metadata["substeps"]), dyn, given=3)
+        obj = t.kinds == 0
+        err = np.abs(pred[:, obj, :3] - t.poses[:, obj, :3]).max()
+        moved = np.abs(t.poses[-1, obj, :3] - t.poses[0, obj, :3]).max()
+        assert moved > 5e-3 and err < 0.02 * moved
+        # wrong physics is visible: ten times the friction moves the object differently
+        wrong = Replay(t).rollout(ContactParams(substeps=t.metadata["substeps"], friction=2.5,
+                                                friction_kinematic=2.5), dyn, given=3)
+        assert np.abs(wrong[:, obj, :3] - t.poses[:, obj, :3]).max() > 5 * err
+
+
+def _synthetic_tosses(n: int, friction: float, dampratio: float, cone: str, seed: int = 0) -> list:
+    """Cube tosses simulated here in MuJoCo with known contact parameters (4 substeps per pose)."""
+    rng = np.random.default_rng(seed)
+    xml = cube_scene_xml(0.0524, 0.37, 8e-4, 0.18, 0.125, timestep=DT / 4)
+    model = mujoco.MjModel.from_xml_string(xml)
+    ContactParams(friction=friction, dampratio=dampratio, cone=cone, substeps=4).apply(model, DT)
+    data = mujoco.MjData(model)
+    out = []
+    for i in range(n):
+        mujoco.mj_resetData(model, data)
+        data.qpos[:3] = [0, 0, rng.uniform(0.15, 0.25)]
+        data.qpos[3:7] = _quat_about(rng.normal(size=3), rng.uniform(0, np.pi))
+        data.qvel[:3] = [rng.uniform(0.5, 1.5), rng.uniform(-0.3, 0.3), rng.uniform(-0.5, 0.5)]
+        data.qvel[3:] = rng.normal(scale=4.0, size=3)
+        track = []
+        for k in range(90):
+            if k:
+                mujoco.mj_step(model, data, 4)
+            track.append(data.qpos[:7].copy())
+        out.append(tracked_trajectory(xml, {"cube": np.array(track)}, DT, name=f"syn{i}"))
+    return out
+
+
+def test_system_identification_recovers_a_known_friction(tmp_path: Path) -> None:
+    true_mu = 0.45
+    trajs = _synthetic_tosses(8, true_mu, 1.0, "elliptic")
+    train, valid = trajs[:5], trajs[5:]
+    rs = ReplaySet(train)
+    at = lambda mu: replay_loss(rs.frame_errors(rs.predict(ContactParams(  # noqa: E731
+        friction=mu, dampratio=1.0, cone="elliptic"))), 3)
+    # the loss has its minimum at the truth (the oracle for the optimiser below)
+    assert at(true_mu) < at(0.18) and at(true_mu) < at(1.0)
+    space = (Dimension("friction", 0.05, 1.5),)
+    fit = fit_contact_params(train, valid, tmp_path / "fit.json", base=ContactParams(dampratio=1.0),
+                             space=space, cones=("elliptic",), evaluations=24, substeps=(4,),
+                             progress=False)
+    assert fit["params"]["friction"] == pytest.approx(true_mu, rel=0.1)
+    assert fit["params"]["cone"] == "elliptic"
+    # a finished fit is read back, not redone
+    again = fit_contact_params(train, valid, tmp_path / "fit.json", space=space, evaluations=1)
+    assert again == json.loads((tmp_path / "fit.json").read_text())
+
+
+def test_contact_params_apply_and_round_trip() -> None:
+    model = mujoco.MjModel.from_xml_string(cube_scene_xml(0.05, 0.37, 8e-4, 0.18, 0.125))
+    p = ContactParams(friction=0.3, timeconst=0.01, dampratio=0.9, cone="elliptic", impratio=3.0,
+                      gravity=-9.6, substeps=5)
+    p.apply(model, 0.01)
+    assert model.geom_friction[:, 0].tolist() == [0.3, 0.3]
+    assert model.geom_solref.tolist() == [[0.01, 0.9], [0.01, 0.9]]
+    assert model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC and model.opt.impratio == 3.0
+    assert model.opt.timestep == pytest.approx(0.002) and model.opt.gravity[2] == -9.6
+    assert ContactParams.from_json(p.to_json()) == p
+    with pytest.raises(ValueError, match="unknown contact parameters"):
+        ContactParams.from_json({"frction": 0.2})
+    assert {d.name for d in DEFAULT_SPACE} <= set(ContactParams.__dataclass_fields__)
+
+
+def test_sim2real_mujoco_stages_on_the_real_sample(tmp_path: Path, capsys) -> None:
+    data = tmp_path / "cube.h5"
+    import_contactnets(SAMPLE, data)
+    out = tmp_path / "run"
+    argv = ["sim2real", "--data", str(data), "--out", str(out), "--no-fignet", "--fractions", "0.5",
+            "0.25", "0.25", "--fit-evaluations", "6", "--fit-trajectories", "2"]
+    assert main(argv) == 0
+    res = json.loads((out / "results.json").read_text())
+    assert res["split"] == {"train": 2, "valid": 1, "test": 1}
+    for key in ("mujoco_nominal", "mujoco_fitted", "no_motion"):
+        assert math.isfinite(res[key]["translation_rmse_final"])
+        assert res[key]["horizon_step"] == 50
+    assert res["no_motion"]["translation_rmse_final_ratio_still"] == 1.0
+    assert "MuJoCo, fitted" in (out / "table.md").read_text()
+    assert (out / "errors_vs_size.png").stat().st_size > 0
+    env = json.loads((out / "mujoco_fitted_env.json").read_text())
+    dt = load_trajectories(data)[0].dt
+    assert env["timestep"] == pytest.approx(dt / res["fit"]["params"]["substeps"])
+    # a second run without --resume refuses to overwrite; with it, nothing is redone
+    assert main(argv) == 2
+    assert "--resume" in capsys.readouterr().err
+    before = (out / "mujoco_fit.json").stat().st_mtime_ns
+    assert main(argv + ["--resume"]) == 0
+    assert (out / "mujoco_fit.json").stat().st_mtime_ns == before
+    # too few trajectories for the split, and sizes beyond the training split, are errors
+    assert main(["sim2real", "--data", str(data), "--out", str(tmp_path / "r2"), "--sizes", "3",
+                 "--fractions", "0.5", "0.25", "0.25"]) == 2
+    err = capsys.readouterr().err
+    assert "error: " in err and "cube.h5" in err and "size 3 exceeds" in err
+    assert main(["sim2real", "--data", str(data), "--out", str(tmp_path / "r3"), "--no-fignet",
+                 "--fractions", "0.9", "0.05", "0.05"]) == 2
+    assert "too few" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_sim2real_evaluates_a_trained_fignet_against_fitted_mujoco(tmp_path: Path) -> None:
+    """The FIGNet stage calls the training function and scores its checkpoint on the test split."""
+    from fignet_gym.train.sim2real import run_sim2real
+
+    data = tmp_path / "cube.h5"
+    import_contactnets(SAMPLE, data)
+    calls = []
+
+    def train(train_file: Path, valid_file: Path, size: int | None, out_dir: Path) -> Path:
+        from fignet_gym.train.real import train_on_split
+
+        calls.append(size)
+        return train_on_split(train_file, valid_file, size, out_dir, budget=2,
+                              overrides={"training.valid_every": 1, "training.batch_size": 1,
+                                         "training.valid_trajectories": 1})
+
+    res = run_sim2real(data, tmp_path / "run", sizes=(1, None), fractions=(0.5, 0.25, 0.25),
+                       fit_evaluations=4, fit_trajectories=2, train_fn=train)
+    assert calls == [1, None]
+    assert set(res["fignet"]) == {"1", "all"}
+    r = res["fignet"]["all"]
+    assert r["training_trajectories"] == 2
+    ratio, lo, hi = r["vs_fitted_mujoco"]["translation_rmse"]
+    fitted = res["mujoco_fitted"]["translation_rmse_final"]
+    assert ratio == pytest.approx(r["translation_rmse_final"] / fitted)
+    assert lo <= ratio <= hi
+
+
+def _outline_distance(outline: np.ndarray, p: np.ndarray) -> float:
+    """Distance from point ``p float[2]`` to a closed polygon's boundary."""
+    a, b = outline, np.roll(outline, -1, 0)
+    ab = b - a
+    t = np.clip(((p - a) * ab).sum(1) / (ab * ab).sum(1), 0, 1)
+    return float(np.linalg.norm(a + t[:, None] * ab - p, axis=1).min())
+
+
+def test_mit_standin_has_noise_per_push_friction_and_pusher_penetration(tmp_path: Path) -> None:
+    from fignet_gym.data.importers import import_mit
+    from fignet_gym.mjcf import MIT_OBJECTS
+
+    raw = tmp_path / "raw"
+    assert main(["mit-standin", "--out", str(raw), "--num", "3", "--seed", "2"]) == 0
+    files = sorted(raw.glob("*.json"))
+    frictions = {json.loads(f.read_text())["standin"]["friction"] for f in files}
+    assert len(files) == 3 and len(frictions) == 3
+    assert import_mit([raw], tmp_path / "p.h5", max_duration=None) == 3
+    closest = []
+    for t in load_trajectories(tmp_path / "p.h5"):
+        obj, tip = t.poses[:, 1], t.poses[:, 2]
+        outline = MIT_OBJECTS[t.metadata["shape"]].outline
+        for k in range(t.num_steps):
+            yaw = 2 * math.atan2(obj[k, 6], obj[k, 3])
+            c, s = math.cos(yaw), math.sin(yaw)
+            local = np.array([[c, s], [-s, c]]) @ (tip[k, :2] - obj[k, :2])
+            closest.append(_outline_distance(outline, local))
+        # tracking noise: the recorded object jitters while it is still at rest
+        still = obj[:5, :2]
+        assert 1e-5 < np.abs(np.diff(still, axis=0)).max() < 5e-3
+    # in contact (tip centre within 6 mm of the outline), the recorded tip centre is ~1 mm closer
+    # than the imported tip's 4.75 mm radius: the median contact distance is about 3.75 mm
+    near = np.array([d for d in closest if d < 0.006])
+    assert len(near) > 10 and float(np.median(near)) < 0.0043
