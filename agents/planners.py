@@ -77,14 +77,7 @@ class CEMConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        _check_common(
-            self.horizon,
-            self.population,
-            self.iterations,
-            self.noise_std,
-            self.noise_correlation,
-            self.replan_every,
-        )
+        _check_common(self)
         if not 1 <= self.elites <= self.population:
             raise ValueError(f"elites must be in [1, population], got {self.elites}")
         if self.min_std < 0:
@@ -121,26 +114,15 @@ class MPPIConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        _check_common(
-            self.horizon,
-            self.population,
-            self.iterations,
-            self.noise_std,
-            self.noise_correlation,
-            self.replan_every,
-        )
+        _check_common(self)
         if self.temperature <= 0:
             raise ValueError(f"temperature must be > 0, got {self.temperature}")
 
 
-def _check_common(
-    horizon: int,
-    population: int,
-    iterations: int,
-    noise_std: float,
-    rho: float = 0.0,
-    replan_every: int = 1,
-) -> None:
+def _check_common(config: CEMConfig | MPPIConfig) -> None:
+    """Raise ``ValueError`` on the sampling settings both planner configs share."""
+    horizon, population, iterations = config.horizon, config.population, config.iterations
+    noise_std, rho, replan_every = config.noise_std, config.noise_correlation, config.replan_every
     if not 1 <= replan_every <= horizon:
         raise ValueError(f"replan_every must be in [1, horizon], got {replan_every}")
     if not 0.0 <= rho < 1.0:

@@ -272,6 +272,17 @@ def layout_size(lay: dict[str, slice]) -> int:
     return max((s.stop for s in lay.values()), default=0)
 
 
+def free_camera(
+    lookat: Sequence[float], distance: float, azimuth: float, elevation: float
+) -> mujoco.MjvCamera:
+    """A free ``MjvCamera`` aimed at ``lookat float[3]`` from ``distance`` (m), ``azimuth`` and
+    ``elevation`` (deg)."""
+    cam = mujoco.MjvCamera()
+    cam.lookat[:] = lookat
+    cam.distance, cam.azimuth, cam.elevation = distance, azimuth, elevation
+    return cam
+
+
 def add_disc(
     scene: mujoco.MjvScene, pos: Sequence[float], radius: float, rgba: Sequence[float]
 ) -> None:

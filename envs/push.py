@@ -7,7 +7,6 @@ from typing import Any
 import mujoco
 import numpy as np
 from gymnasium import spaces
-from gymnasium.vector import AutoresetMode
 
 from fignet_gym.dynamics import Dynamics
 from fignet_gym.envs.base import (
@@ -19,7 +18,7 @@ from fignet_gym.envs.base import (
     yaw_of,
 )
 from fignet_gym.envs.tasks import PushTask
-from fignet_gym.envs.vector import BatchedVectorEnv
+from fignet_gym.envs.vector import SingleEnvVectorEnv
 from fignet_gym.mjcf import push_object, push_scene_xml
 
 
@@ -350,23 +349,11 @@ class PushEnv(MjDynamicsEnv):
         scene.ngeom += 1
 
 
-class PushVectorEnv(BatchedVectorEnv):
-    """``num_envs`` :class:`PushEnv` stepped by one batched dynamics call.
+class PushVectorEnv(SingleEnvVectorEnv):
+    """``num_envs`` :class:`PushEnv` stepped by one batched dynamics call; arguments as
+    :class:`~fignet_gym.envs.vector.SingleEnvVectorEnv`.
 
-    The ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` entry point.
-
-    Args:
-        num_envs: number of sub-environments.
-        max_episode_steps: per-episode step limit (``gym.make_vec`` passes the registered 50).
-        autoreset_mode: Gymnasium ``AutoresetMode`` (default ``NEXT_STEP``).
-        kwargs: :class:`PushEnv` arguments, shared by every sub-environment.
+    ``max_episode_steps``: ``gym.make_vec`` passes the registered 50.
     """
 
-    def __init__(
-        self,
-        num_envs: int = 1,
-        max_episode_steps: int | None = None,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(PushEnv(**kwargs), num_envs, max_episode_steps, autoreset_mode)
+    env_class = PushEnv

@@ -17,7 +17,7 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
-from fignet_gym.dynamics import STATE_SPEC
+from fignet_gym.dynamics import STATE_SPEC, state_offsets
 
 
 def yaw_of(quat: np.ndarray) -> np.ndarray:
@@ -43,15 +43,7 @@ class StateLayout:
         self.nstate = mujoco.mj_stateSize(model, STATE_SPEC)
         self.qpos = 1  # after time
         self.qvel = 1 + model.nq
-        self.mocap_pos = mujoco.mj_stateSize(
-            model,
-            int(
-                mujoco.mjtState.mjSTATE_TIME
-                | mujoco.mjtState.mjSTATE_QPOS
-                | mujoco.mjtState.mjSTATE_QVEL
-                | mujoco.mjtState.mjSTATE_ACT
-            ),
-        )
+        self.mocap_pos = state_offsets(model)[0]
         self.mocap_quat = self.mocap_pos + 3 * model.nmocap
         self.nmocap = model.nmocap
 

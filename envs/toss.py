@@ -8,12 +8,11 @@ from typing import Any
 import mujoco
 import numpy as np
 from gymnasium import spaces
-from gymnasium.vector import AutoresetMode
 
 from fignet_gym.dynamics import STATE_SPEC, Dynamics
-from fignet_gym.envs.base import MjDynamicsEnv, add_disc, check_arguments, layout, layout_size
+from fignet_gym.envs.base import MjDynamicsEnv, add_disc, check_arguments, free_camera, layout, layout_size
 from fignet_gym.envs.tasks import TossTask
-from fignet_gym.envs.vector import BatchedVectorEnv
+from fignet_gym.envs.vector import SingleEnvVectorEnv
 from fignet_gym.mjcf import TossObject, toss_scene_xml, unit_shape_mesh
 
 #: The default objects: three metal cubes of Kubric's small size (flat faces: face-face contacts).
@@ -293,32 +292,17 @@ class TossEnv(MjDynamicsEnv):
         return terms, k >= len(self.objects), False, info
 
     def _camera(self) -> mujoco.MjvCamera:
-        cam = mujoco.MjvCamera()
-        cam.lookat[:] = (-0.3, 0.0, 0.5)
-        cam.distance, cam.azimuth, cam.elevation = 11.0, -150.0, -30.0
-        return cam
+        return free_camera((-0.3, 0.0, 0.5), 11.0, -150.0, -30.0)
 
     def _decorate(self, scene: mujoco.MjvScene) -> None:
         add_disc(scene, (*self.target, 0.002), self.target_radius, (0.1, 0.8, 0.2, 0.35))
 
 
-class TossVectorEnv(BatchedVectorEnv):
-    """``num_envs`` :class:`TossEnv` stepped by one batched dynamics call.
+class TossVectorEnv(SingleEnvVectorEnv):
+    """``num_envs`` :class:`TossEnv` stepped by one batched dynamics call; arguments as
+    :class:`~fignet_gym.envs.vector.SingleEnvVectorEnv`.
 
-    The ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` entry point.
-
-    Args:
-        num_envs: number of sub-environments.
-        max_episode_steps: per-episode step limit (``None``: episodes end after the last toss).
-        autoreset_mode: Gymnasium ``AutoresetMode`` (default ``NEXT_STEP``).
-        kwargs: :class:`TossEnv` arguments, shared by every sub-environment.
+    ``max_episode_steps=None``: episodes end after the last toss.
     """
 
-    def __init__(
-        self,
-        num_envs: int = 1,
-        max_episode_steps: int | None = None,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(TossEnv(**kwargs), num_envs, max_episode_steps, autoreset_mode)
+    env_class = TossEnv

@@ -17,6 +17,7 @@ from fignet_gym.dynamics.base import (
     rollout_loop,
     set_mocap,
     split_state,
+    state_offsets,
 )
 from fignet_gym.dynamics.factory import DYNAMICS_FACTORIES, make_dynamics
 from fignet_gym.dynamics.learned import FIGNetDynamics
@@ -26,5 +27,5 @@ __all__ = [
     "CONTROL_SPEC", "DYNAMICS_FACTORIES", "PHYSICS_SPEC", "STATE_SPEC", "DivergenceError",
     "Dynamics", "DynamicsBase",
     "FIGNetDynamics", "MujocoDynamics", "check_rollout_inputs", "make_dynamics", "rollout_loop",
-    "join_state", "set_mocap", "split_state",
+    "join_state", "set_mocap", "split_state", "state_offsets",
 ]

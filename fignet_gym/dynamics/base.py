@@ -165,7 +165,7 @@ def set_mocap(model: mujoco.MjModel, data: mujoco.MjData, control_row: np.ndarra
     data.mocap_quat[:] = control_row[3 * nm :].reshape(nm, 4)
 
 
-def _state_offsets(model: mujoco.MjModel) -> tuple[int, int, int]:
+def state_offsets(model: mujoco.MjModel) -> tuple[int, int, int]:
     """Sizes in :data:`STATE_SPEC`: physics before the mocap poses, mocap poses, plugin state."""
     pre = mujoco.mj_stateSize(
         model,
@@ -183,7 +183,7 @@ def split_state(model: mujoco.MjModel, state: np.ndarray) -> tuple[np.ndarray, n
     """:data:`STATE_SPEC` states ``float64[..., nstate]`` -> ``mjSTATE_FULLPHYSICS`` states
     ``float64[..., nphys]`` and mocap poses ``float64[..., nmocap * 7]`` (positions, then
     quaternions: the control layout)."""
-    pre, nm7, _ = _state_offsets(model)
+    pre, nm7, _ = state_offsets(model)
     state = np.asarray(state, dtype=np.float64)
     phys = np.concatenate((state[..., :pre], state[..., pre + nm7 :]), axis=-1)
     return phys, state[..., pre : pre + nm7].copy()
@@ -192,7 +192,7 @@ def split_state(model: mujoco.MjModel, state: np.ndarray) -> tuple[np.ndarray, n
 def join_state(model: mujoco.MjModel, phys: np.ndarray, mocap: np.ndarray) -> np.ndarray:
     """Inverse of :func:`split_state`: ``float64[..., nphys]`` and ``float64[..., nmocap * 7]``
     -> ``float64[..., nstate]``."""
-    pre, _, _ = _state_offsets(model)
+    pre, _, _ = state_offsets(model)
     mocap = np.broadcast_to(mocap, (*phys.shape[:-1], mocap.shape[-1]))
     return np.concatenate((phys[..., :pre], mocap, phys[..., pre:]), axis=-1)
 
@@ -200,8 +200,9 @@ def join_state(model: mujoco.MjModel, phys: np.ndarray, mocap: np.ndarray) -> np
 class DynamicsBase:
     """Defaults for a :class:`Dynamics`: subclasses implement :meth:`step` only.
 
-    ``step_many`` loops over ``step``, ``rollout`` loops ``step`` on a scratch ``MjData`` loaded
-    with each initial state (mocap poses included), ``validate`` accepts everything.
+    ``step_many`` loops over ``step``, ``rollout`` checks its inputs and calls ``_rollout`` (the
+    batched override point), which loops ``step`` on a scratch ``MjData`` loaded with each initial
+    state (mocap poses included), ``validate`` accepts everything.
     """
 
     def step(self, model: mujoco.MjModel, data: mujoco.MjData, nstep: int = 1) -> None:
@@ -233,8 +234,18 @@ class DynamicsBase:
         *,
         frame_skip: int = 1,
     ) -> np.ndarray:
-        """A loop of :meth:`step` per rollout (see :meth:`Dynamics.rollout`); diverged rows: NaN."""
+        """:meth:`Dynamics.rollout`: the inputs checked and broadcast by
+        :func:`check_rollout_inputs`, then :meth:`_rollout` (what a subclass overrides)."""
         state, control, nstep = check_rollout_inputs(model, initial_state, control, nstep)
+        return self._rollout(model, state, control, nstep, frame_skip)
+
+    def _rollout(
+        self, model: mujoco.MjModel, state: np.ndarray, control: np.ndarray, nstep: int,
+        frame_skip: int,
+    ) -> np.ndarray:
+        """A loop of :meth:`step` per rollout on checked inputs: ``float64[B, nstate]`` states,
+        ``float64[B, nstep, nmocap * 7]`` controls -> ``float64[B, nstep, nstate]``; diverged
+        rows: NaN."""
         out = np.full((state.shape[0], nstep, state.shape[1]), np.nan)
         data = mujoco.MjData(model)
         for b in range(state.shape[0]):

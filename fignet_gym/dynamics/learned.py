@@ -18,7 +18,6 @@ from fignet_gym.dynamics.base import (
     STATE_SPEC,
     DivergenceError,
     DynamicsBase,
-    check_rollout_inputs,
     set_mocap,
 )
 from fignet_gym.pretrained import load_checkpoint
@@ -414,32 +413,26 @@ class FIGNetDynamics(DynamicsBase):
                 "; ".join(f"[{b}] {bad[b]}" for b in order), order, [bad[b] for b in order]
             )
 
-    def rollout(
-        self,
-        model: mujoco.MjModel,
-        initial_state: np.ndarray,
-        control: np.ndarray | None = None,
-        nstep: int | None = None,
-        *,
-        frame_skip: int = 1,
+    def _rollout(
+        self, model: mujoco.MjModel, state: np.ndarray, control: np.ndarray, nstep: int,
+        frame_skip: int,
     ) -> np.ndarray:
         """All ``B`` rollouts in one batched graph per learned step.
 
         Args:
-            initial_state: ``float64[B or 1, nstate]`` (:data:`~fignet_gym.dynamics.STATE_SPEC`:
+            state: ``float64[B, nstate]`` (:data:`~fignet_gym.dynamics.STATE_SPEC`:
                 full physics and mocap poses); free-joint velocities seed the history
                 (constant-velocity back-extrapolation), mocap bodies start at rest at the state's
                 mocap poses (as :meth:`step` reseeds them).
-            control: ``float64[B or 1, nstep, nmocap * 7]`` mocap targets (positions, then
+            control: ``float64[B, nstep, nmocap * 7]`` mocap targets (positions, then
                 quaternions).
-            nstep: number of recorded states (default: ``control.shape[1]``).
+            nstep: number of recorded states.
             frame_skip: MuJoCo timesteps per recorded state; ``frame_skip * timestep`` must be a
                 whole number of learned steps.
 
         Returns:
             ``float64[B, nstep, nstate]``; a rollout that diverges is NaN from that step on.
         """
-        state, control, nstep = check_rollout_inputs(model, initial_state, control, nstep)
         nlearn = self.learned_steps(model, frame_skip)
         info = self._scene_info(model)
         B, nstate = state.shape

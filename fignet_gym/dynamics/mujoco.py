@@ -11,7 +11,6 @@ from fignet_gym.dynamics.base import (
     CONTROL_SPEC,
     DivergenceError,
     DynamicsBase,
-    check_rollout_inputs,
     join_state,
     split_state,
 )
@@ -67,32 +66,26 @@ class MujocoDynamics(DynamicsBase):
                 "(it reset the simulation)"
             )
 
-    def rollout(
-        self,
-        model: mujoco.MjModel,
-        initial_state: np.ndarray,
-        control: np.ndarray | None = None,
-        nstep: int | None = None,
-        *,
-        frame_skip: int = 1,
+    def _rollout(
+        self, model: mujoco.MjModel, state: np.ndarray, control: np.ndarray, nstep: int,
+        frame_skip: int,
     ) -> np.ndarray:
         """``mujoco.rollout`` on a persistent thread pool, one state per ``frame_skip`` timesteps.
 
         Args:
-            initial_state: ``float64[B or 1, nstate]`` (:data:`~fignet_gym.dynamics.STATE_SPEC`:
+            state: ``float64[B, nstate]`` (:data:`~fignet_gym.dynamics.STATE_SPEC`:
                 full physics and mocap poses).
-            control: ``float64[B or 1, nstep, nmocap * 7]`` mocap targets (positions, then
+            control: ``float64[B, nstep, nmocap * 7]`` mocap targets (positions, then
                 quaternions): row ``t`` is reached linearly over the ``frame_skip`` timesteps of
                 step ``t``, from row ``t - 1`` (from the initial state's mocap pose for ``t = 0``),
                 exactly as :meth:`step` moves them.
-            nstep: number of recorded states (default: ``control.shape[1]``).
+            nstep: number of recorded states.
             frame_skip: MuJoCo timesteps per recorded state (1: exactly ``mujoco.rollout``).
 
         Returns:
             ``float64[B, nstep, nstate]`` the state after each ``frame_skip`` timesteps (its mocap
             poses are the control rows: where the targets put them).
         """
-        state, control, nstep = check_rollout_inputs(model, initial_state, control, nstep)
         if frame_skip < 1:
             raise ValueError(f"frame_skip must be >= 1, got {frame_skip}")
         from mujoco import rollout as mj_rollout
