@@ -419,19 +419,10 @@ class FIGNetDynamics(DynamicsBase):
     ) -> np.ndarray:
         """All ``B`` rollouts in one batched graph per learned step.
 
-        Args:
-            state: ``float64[B, nstate]`` (:data:`~fignet_gym.dynamics.STATE_SPEC`:
-                full physics and mocap poses); free-joint velocities seed the history
-                (constant-velocity back-extrapolation), mocap bodies start at rest at the state's
-                mocap poses (as :meth:`step` reseeds them).
-            control: ``float64[B, nstep, nmocap * 7]`` mocap targets (positions, then
-                quaternions).
-            nstep: number of recorded states.
-            frame_skip: MuJoCo timesteps per recorded state; ``frame_skip * timestep`` must be a
-                whole number of learned steps.
-
-        Returns:
-            ``float64[B, nstep, nstate]``; a rollout that diverges is NaN from that step on.
+        Shapes as :meth:`DynamicsBase._rollout`. Free-joint velocities seed the history
+        (constant-velocity back-extrapolation), mocap bodies start at rest at the state's mocap
+        poses (as :meth:`step` reseeds them); ``frame_skip * timestep`` must be a whole number of
+        learned steps. A rollout that diverges is NaN from that step on.
         """
         nlearn = self.learned_steps(model, frame_skip)
         info = self._scene_info(model)

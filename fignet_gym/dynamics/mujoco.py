@@ -72,19 +72,10 @@ class MujocoDynamics(DynamicsBase):
     ) -> np.ndarray:
         """``mujoco.rollout`` on a persistent thread pool, one state per ``frame_skip`` timesteps.
 
-        Args:
-            state: ``float64[B, nstate]`` (:data:`~fignet_gym.dynamics.STATE_SPEC`:
-                full physics and mocap poses).
-            control: ``float64[B, nstep, nmocap * 7]`` mocap targets (positions, then
-                quaternions): row ``t`` is reached linearly over the ``frame_skip`` timesteps of
-                step ``t``, from row ``t - 1`` (from the initial state's mocap pose for ``t = 0``),
-                exactly as :meth:`step` moves them.
-            nstep: number of recorded states.
-            frame_skip: MuJoCo timesteps per recorded state (1: exactly ``mujoco.rollout``).
-
-        Returns:
-            ``float64[B, nstep, nstate]`` the state after each ``frame_skip`` timesteps (its mocap
-            poses are the control rows: where the targets put them).
+        Shapes as :meth:`DynamicsBase._rollout`. Control row ``t`` is reached linearly over the
+        ``frame_skip`` timesteps of step ``t``, from row ``t - 1`` (from the initial state's mocap
+        pose for ``t = 0``), exactly as :meth:`step` moves them; ``frame_skip = 1`` is exactly
+        ``mujoco.rollout``. Each returned state's mocap poses are the control rows.
         """
         if frame_skip < 1:
             raise ValueError(f"frame_skip must be >= 1, got {frame_skip}")
