@@ -1,19 +1,30 @@
-"""Sampling-based model-predictive control for Push-v0 through any :class:`Dynamics`.
+"""Sampling-based model-predictive control (CEM, MPPI) of Push and Toss through any :class:`Dynamics`.
 
-Every call of :meth:`SamplingPlanner.plan` scores ``population`` tip-velocity sequences of
-``horizon`` steps with **one** ``dynamics.rollout`` call per iteration (all candidates as one batch:
-one batched graph per learned step for FIGNet, ``mujoco.rollout``'s threads for MuJoCo), refits the
+Every call of :meth:`SamplingPlanner.plan` scores ``population`` action sequences of ``horizon``
+steps with **one** ``dynamics.rollout`` call per iteration (all candidates as one batch: one
+batched graph per learned step for FIGNet, ``mujoco.rollout``'s threads for MuJoCo), refits the
 sampling distribution and returns the first action (receding horizon). The next call starts from
-the previous plan shifted by one step (warm start).
+the previous plan shifted by one step (warm start). On Toss-v0 a plan is one release (``horizon``
+is 1) and each candidate's rollout is the whole settle of the scene.
 
-The cost of a candidate is minus the environment's own reward summed over the predicted steps
-(through :class:`~fignet_gym.agents.task.PushTask`), plus an optional shaping term that draws the
-tip towards the pushing point behind the object (``approach_weight``, cost per metre). Candidates
-whose rollout diverged (NaN rows, or a :class:`DivergenceError`) cost ``inf`` and are never chosen;
-if every candidate diverged the planner keeps its previous plan.
+The cost of a candidate is minus the environment's own reward over the predicted states (through
+:mod:`~fignet_gym.agents.task`, which calls the env's task functions), plus on Push an optional
+shaping term that draws the tip towards the pushing point behind the object (``approach_weight``,
+cost per metre). Candidates whose rollout diverged (NaN rows, or a :class:`DivergenceError`) cost
+``inf`` and are never chosen; if every candidate diverged the planner keeps its previous plan.
 
-    planner = CEMPlanner(FIGNetDynamics("push"), CEMConfig(horizon=10, population=64))
-    stats = run_episode(gym.make("fignet_gym/Push-v0"), planner, seed=0)  # plan learned, act MuJoCo
+Planners follow stable-baselines3's policy interface: ``predict(obs, state, episode_start,
+deterministic) -> (action, state)``, so ``stable_baselines3.common.evaluation.evaluate_policy``
+runs them; they plan from the bound environment's whole state, not from ``obs``.
+
+    planner = CEMPlanner(FIGNetDynamics("push"), CEMConfig(horizon=8, population=48))
+    stats = run_episode(gym.make("fignet_gym/Push-v1"), planner, seed=0)  # plan learned, act MuJoCo
+
+Why not ``pytorch-mppi``: its ``MPPI`` calls a one-step ``dynamics(state[K, nx], action[K, nu])``
+``horizon`` times per iteration. A FIGNet step needs the object's pose history, which a state
+vector would carry only as velocities (reseeding the history every step changes the model's
+predictions), and one rollout call per iteration (not per step) is what makes MuJoCo's threaded
+rollout and FIGNet's batched graph cheap.
 """
 
 from __future__ import annotations
@@ -23,10 +34,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
+import mujoco
 import numpy as np
 
-from fignet_gym.agents.task import PushTask, push_env_of
-from fignet_gym.dynamics import DivergenceError, Dynamics
+from fignet_gym.agents.task import PlanningProblem, problem_for
+from fignet_gym.dynamics import STATE_SPEC, Dynamics
 
 
 @dataclass(frozen=True)
@@ -34,28 +46,38 @@ class CEMConfig:
     """Cross-entropy method settings.
 
     Args:
-        horizon: planned steps ``T`` (environment steps of ``frame_skip`` timesteps).
+        horizon: planned steps ``T`` (environment steps of ``frame_skip`` timesteps; 1 on Toss).
         population: candidate sequences ``B`` per iteration (one of them is the current mean).
         elites: best candidates the Gaussian is refitted to.
         iterations: refits per planning step.
         noise_std: initial standard deviation (action units) of every step and axis.
+        noise_correlation: correlation ``rho`` of the sampling noise between consecutive steps
+            (AR(1): smooth candidates that keep pushing one way, as iCEM's coloured noise).
         min_std: floor of the refitted standard deviation (keeps exploring).
         approach_weight: cost per metre between the final tip and the pushing point (0: the
             environment's reward alone).
+        terminal_weight: the last predicted step's cost counted this many more times (as if the
+            final state were held that long): a short horizon otherwise prefers not to start a
+            push whose first steps turn the object.
+        replan_every: optimise every this many actions and play the plan's next actions in
+            between (1: classic receding horizon); divides the planning cost per action.
         seed: of the sampling generator (``reset`` restarts it).
     """
 
     horizon: int = 10
-    population: int = 64
-    elites: int = 8
-    iterations: int = 3
+    population: int = 48
+    elites: int = 6
+    iterations: int = 2
     noise_std: float = 0.5
+    noise_correlation: float = 0.0
     min_std: float = 0.05
     approach_weight: float = 100.0
+    terminal_weight: float = 0.0
+    replan_every: int = 1
     seed: int = 0
 
     def __post_init__(self) -> None:
-        _check_common(self.horizon, self.population, self.iterations, self.noise_std)
+        _check_common(self)
         if not 1 <= self.elites <= self.population:
             raise ValueError(f"elites must be in [1, population], got {self.elites}")
         if self.min_std < 0:
@@ -73,25 +95,38 @@ class MPPIConfig:
         temperature: ``lambda`` of the weights ``exp(-(cost - min cost) / lambda)``, in cost
             units (minus summed reward; one centimetre of position error for one step is 0.1).
         noise_std: standard deviation (action units) of the perturbations.
+        noise_correlation: correlation of the perturbations between consecutive steps (AR(1)).
         approach_weight: cost per metre between the final tip and the pushing point.
+        terminal_weight: the last predicted step's cost counted this many more times.
+        replan_every: optimise every this many actions (see :class:`CEMConfig`).
         seed: of the sampling generator.
     """
 
     horizon: int = 10
-    population: int = 64
+    population: int = 48
     iterations: int = 2
     temperature: float = 0.05
     noise_std: float = 0.5
+    noise_correlation: float = 0.0
     approach_weight: float = 100.0
+    terminal_weight: float = 0.0
+    replan_every: int = 1
     seed: int = 0
 
     def __post_init__(self) -> None:
-        _check_common(self.horizon, self.population, self.iterations, self.noise_std)
+        _check_common(self)
         if self.temperature <= 0:
             raise ValueError(f"temperature must be > 0, got {self.temperature}")
 
 
-def _check_common(horizon: int, population: int, iterations: int, noise_std: float) -> None:
+def _check_common(config: CEMConfig | MPPIConfig) -> None:
+    """Raise ``ValueError`` on the sampling settings both planner configs share."""
+    horizon, population, iterations = config.horizon, config.population, config.iterations
+    noise_std, rho, replan_every = config.noise_std, config.noise_correlation, config.replan_every
+    if not 1 <= replan_every <= horizon:
+        raise ValueError(f"replan_every must be in [1, horizon], got {replan_every}")
+    if not 0.0 <= rho < 1.0:
+        raise ValueError(f"noise_correlation must be in [0, 1), got {rho}")
     if horizon < 1 or population < 2 or iterations < 1:
         raise ValueError(
             f"need horizon >= 1, population >= 2, iterations >= 1; got {horizon}, {population}, {iterations}"
@@ -109,13 +144,15 @@ class PlanInfo:
             candidate diverged).
         diverged: candidates (over all iterations) whose rollout diverged.
         evaluated: candidates evaluated.
-        seconds: wall time of the call.
+        seconds: wall time of the call. cpu_seconds: CPU time of the process during the call
+            (every thread).
     """
 
     cost: float
     diverged: int
     evaluated: int
     seconds: float
+    cpu_seconds: float
 
 
 class SamplingPlanner:
@@ -125,11 +162,16 @@ class SamplingPlanner:
         dynamics: predicts the candidates' outcomes (any :class:`Dynamics`; it need not be the
             acting environment's).
         config: the algorithm's settings.
-        env: optionally, the Push-v0 environment to plan for (else bound by the first ``plan``).
+        env: optionally, the environment to plan for (else bound by the first ``plan``).
+        model: optionally, the ``MjModel`` to roll out (default: the env's); it must have the
+            env's bodies and joints (``ValueError`` otherwise), e.g. the same scene with other
+            friction.
 
     Attributes:
-        plan_actions: ``float64[T, 2]`` the current plan (after ``plan``: its first row was
+        plan_actions: ``float64[T, A]`` the current plan (after ``plan``: its first row was
             returned); the next ``plan`` starts from it shifted by one step.
+        prediction: ``float64[T', nstate]`` the planning model's predicted states of the chosen
+            candidate (``None`` before a plan or when every candidate diverged).
         last: :class:`PlanInfo` of the last call.
     """
 
@@ -137,101 +179,158 @@ class SamplingPlanner:
     config_class: type[CEMConfig] | type[MPPIConfig]
 
     def __init__(
-        self, dynamics: Dynamics, config: CEMConfig | MPPIConfig | None = None,
+        self,
+        dynamics: Dynamics,
+        config: CEMConfig | MPPIConfig | None = None,
         env: gym.Env | None = None,
+        model: mujoco.MjModel | None = None,
     ) -> None:
         self.dynamics = dynamics
         self.config = config or self.config_class()
-        self.task: PushTask | None = None
+        self.model = model
+        self.problem: PlanningProblem | None = None
         self.last: PlanInfo | None = None
+        self.prediction: np.ndarray | None = None
+        self._horizon = self.config.horizon
+        self._action_dim = 2
         self.reset()
         if env is not None:
             self.bind(env)
 
+    @property
+    def horizon(self) -> int:
+        """Planned steps ``T`` (the config's, or the problem's own: 1 on Toss)."""
+        return self._horizon
+
     def reset(self, seed: int | None = None) -> None:
         """Forget the plan (new episode) and restart the generator (``seed``: else the config's)."""
         self.rng = np.random.default_rng(self.config.seed if seed is None else seed)
-        self.plan_actions = np.zeros((self.config.horizon, 2))
+        self.plan_actions = np.zeros((self._horizon, self._action_dim))
+        self.prediction = None
         self._fresh = True
+        self._played = 0  # actions of the current plan already returned
 
     def bind(self, env: gym.Env) -> None:
-        """Plan for ``env`` (a Push-v0 environment, wrappers allowed) from now on."""
-        push = push_env_of(env)
-        if self.task is None or self.task.env is not push:
-            self.dynamics.validate(push.model, push.nstep, push.scene_type)
-            self.task = PushTask(push)
+        """Plan for ``env`` (Push-v0/v1 or Toss-v0, wrappers allowed) from now on.
+
+        Raises ``ValueError`` if the planning dynamics or model do not fit the env's scene.
+        """
+        inner = getattr(env, "unwrapped", env)
+        if self.problem is None or self.problem.env is not inner:
+            problem = problem_for(inner, self.model)
+            problem.validate(self.dynamics)
+            self.problem = problem
+            horizon = problem.horizon or self.config.horizon
+            if (horizon, problem.action_dim) != (self._horizon, self._action_dim):
+                self._horizon, self._action_dim = horizon, problem.action_dim
+                self.reset()
 
     def plan(self, env_or_state: gym.Env | np.ndarray) -> np.ndarray:
         """The first action of a new plan.
 
         Args:
             env_or_state: the environment (plans from its current state and binds it), or a
-                ``float64[nstate]`` ``mjSTATE_INTEGRATION`` state (``fignet_gym.agents.plan_state``)
+                ``float64[nstate]`` state (``env.get_state()``, ``fignet_gym.agents.plan_state``)
                 of the bound environment's model; the goal is the bound environment's.
 
         Returns:
-            ``float32[2]`` tip-velocity action in ``[-1, 1]``, always finite.
+            ``float32[A]`` action in ``[-1, 1]``, always finite.
         """
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         if isinstance(env_or_state, np.ndarray):
-            if self.task is None:
+            if self.problem is None:
                 raise RuntimeError("plan(state) needs an environment first: bind(env) or plan(env)")
-            state = env_or_state
+            state = np.asarray(env_or_state, dtype=np.float64)
+            expected = mujoco.mj_stateSize(self.problem.env.model, STATE_SPEC)
+            if state.shape != (expected,):
+                raise ValueError(
+                    f"state must be float64[{expected}] (STATE_SPEC: env.get_state()), "
+                    f"got shape {state.shape}"
+                )
         else:
             self.bind(env_or_state)
-            state = None
-        assert self.task is not None
-        phys, mocap = self.task.load(state)
-        if not self._fresh:  # warm start: the previous plan, one step on, its last step repeated
-            self.plan_actions = np.concatenate([self.plan_actions[1:], self.plan_actions[-1:]])
-        self._fresh = False
-        cost, diverged, evaluated = self._optimise(phys, mocap)
-        self.last = PlanInfo(cost, diverged, evaluated, time.perf_counter() - start)
-        return self.plan_actions[0].astype(np.float32)
+            assert self.problem is not None
+            state = self.problem.env.get_state()
+        every = min(self.config.replan_every, self._horizon)
+        if self._fresh or self._played >= every:
+            if not self._fresh:  # warm start: the previous plan shifted, its last step repeated
+                n = self._played
+                self.plan_actions = np.concatenate(
+                    [self.plan_actions[n:], np.repeat(self.plan_actions[-1:], n, axis=0)]
+                )
+            self._fresh = False
+            self._played = 0
+            cost, diverged, evaluated = self._optimise(state)
+        else:  # play the plan on: no optimisation this step
+            cost, diverged, evaluated = self.last.cost if self.last else np.inf, 0, 0
+        action = self.plan_actions[self._played].astype(np.float32)
+        self._played += 1
+        self.last = PlanInfo(
+            cost, diverged, evaluated, time.perf_counter() - start, time.process_time() - cpu
+        )
+        return action
 
-    def _optimise(self, phys: np.ndarray, mocap: np.ndarray) -> tuple[float, int, int]:
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, Any]:
+        """stable-baselines3's policy interface: the action for the bound environment's state.
+
+        Args:
+            observation: ``float[D]`` or ``float[1, D]`` (one environment): must be the bound
+                environment's current observation (``ValueError`` otherwise: a planner plans
+                from the environment's whole state, which the observation only summarises).
+            state: passed through (no recurrent state).
+            episode_start: ``bool[1]``; true resets the plan (a new episode).
+            deterministic: accepted for the interface; the sampling is seeded either way.
+
+        Returns:
+            ``float32[A]`` or ``float32[1, A]`` (as ``observation``), and ``state``.
+        """
+        if self.problem is None:
+            raise RuntimeError("predict needs an environment: pass env= or call bind(env) first")
+        obs = np.asarray(observation, dtype=np.float32)
+        batched = obs.ndim == 2
+        if batched and obs.shape[0] != 1:
+            raise ValueError(f"planners control one environment, got {obs.shape[0]} observations")
+        if episode_start is not None and bool(np.asarray(episode_start).ravel()[0]):
+            self.reset()
+        current = self.problem.env.observe()
+        if obs.reshape(-1).shape != current.shape or not np.allclose(
+            obs.reshape(-1), current, atol=1e-5
+        ):
+            raise ValueError(
+                "predict: the observation is not the bound environment's current one "
+                "(bind the planner to the environment being evaluated)"
+            )
+        action = self.plan(self.problem.env)
+        return (action[None] if batched else action), state
+
+    def _optimise(self, state: np.ndarray) -> tuple[float, int, int]:
         """Update :attr:`plan_actions`; returns its cost, diverged and evaluated candidates."""
         raise NotImplementedError
 
     def _sample(self, mean: np.ndarray, std: np.ndarray | float) -> np.ndarray:
-        """``float64[B, T, 2]`` candidates in ``[-1, 1]``: ``mean`` first, then Gaussian samples."""
+        """``float64[B, T, A]`` candidates in ``[-1, 1]``: ``mean`` first, then Gaussian samples."""
         cfg = self.config
-        noise = self.rng.standard_normal((cfg.population - 1, cfg.horizon, 2))
+        noise = self.rng.standard_normal((cfg.population - 1, *mean.shape))
+        rho = cfg.noise_correlation
+        for t in range(1, mean.shape[0]):  # AR(1) along the horizon, unit variance per step
+            noise[:, t] = rho * noise[:, t - 1] + np.sqrt(1.0 - rho**2) * noise[:, t]
         samples = np.clip(mean + std * noise, -1.0, 1.0)
         return np.concatenate([mean[None], samples])
 
-    def _scored_samples(self, mean: np.ndarray, std: np.ndarray | float, phys: np.ndarray,
-                        mocap: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Candidates around ``mean``, their costs and which are finite:
-        ``(float64[B, T, 2], float64[B], bool[B])``."""
-        actions = self._sample(mean, std)
-        cost = self.costs(phys, mocap, actions)
-        return actions, cost, np.isfinite(cost)
-
-    def costs(self, phys: np.ndarray, mocap: np.ndarray, actions: np.ndarray) -> np.ndarray:
-        """Cost of candidate action sequences, from one batched rollout.
-
-        Args:
-            phys: ``float64[nphys]`` initial ``mjSTATE_FULLPHYSICS`` state.
-            mocap: ``float64[nmocap * 7]`` initial mocap poses.
-            actions: ``float[B, T, 2]``.
-
-        Returns:
-            ``float64[B]``: minus the summed environment reward, plus ``approach_weight`` times
-            the final tip's distance to the pushing point; ``inf`` for diverged rollouts.
-        """
-        assert self.task is not None
-        task = self.task
-        control, applied = task.controls(mocap, actions)
-        try:
-            states = self.dynamics.rollout(task.model, phys[None], control, frame_skip=task.nstep)
-        except DivergenceError:  # a user Dynamics may raise instead of returning NaN rows
-            return np.full(len(actions), np.inf)
-        cost = -task.rewards(states, control, applied).sum(axis=1)
-        if self.config.approach_weight:
-            cost += self.config.approach_weight * task.approach_distance(states, control)
-        cost[~np.isfinite(cost)] = np.inf
-        return cost
+    def costs(self, state: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """Cost ``float64[B]`` of candidates ``float[B, T, A]`` from ``state float64[nstate]``,
+        from one batched rollout, and the predicted states (``inf`` / ``None``: diverged)."""
+        assert self.problem is not None
+        cfg = self.config
+        return self.problem.evaluate(
+            self.dynamics, state, actions, cfg.approach_weight, cfg.terminal_weight
+        )
 
 
 class CEMPlanner(SamplingPlanner):
@@ -241,26 +340,29 @@ class CEMPlanner(SamplingPlanner):
     always among the candidates, so a plan never gets worse under the model by replanning).
 
     Args:
-        dynamics: any :class:`Dynamics`. config: :class:`CEMConfig`. env: optional Push-v0 env.
+        dynamics: any :class:`Dynamics`. config: :class:`CEMConfig`. env, model: see
+            :class:`SamplingPlanner`.
     """
 
     config: CEMConfig
     config_class = CEMConfig
 
-    def _optimise(self, phys: np.ndarray, mocap: np.ndarray) -> tuple[float, int, int]:
+    def _optimise(self, state: np.ndarray) -> tuple[float, int, int]:
         cfg = self.config
         mean = self.plan_actions.copy()
         std = np.full_like(mean, cfg.noise_std)
         best, best_cost, diverged = mean, np.inf, 0
         for _ in range(cfg.iterations):
-            actions, cost, finite = self._scored_samples(mean, std, phys, mocap)
-            ok = np.flatnonzero(finite)
+            actions = self._sample(mean, std)
+            cost, states = self.costs(state, actions)
+            ok = np.flatnonzero(np.isfinite(cost))
             diverged += len(cost) - len(ok)
             if not len(ok):
                 continue  # nothing to learn from: resample around the same distribution
             order = ok[np.argsort(cost[ok], kind="stable")]
             if cost[order[0]] < best_cost:
                 best, best_cost = actions[order[0]], float(cost[order[0]])
+                self.prediction = None if states is None else states[order[0]]
             elite = actions[order[: cfg.elites]]
             mean, std = elite.mean(0), np.maximum(elite.std(0), cfg.min_std)
         self.plan_actions = best.copy()
@@ -274,21 +376,26 @@ class MPPIPlanner(SamplingPlanner):
     returned action is the first step of the weighted mean (clipped to ``[-1, 1]``).
 
     Args:
-        dynamics: any :class:`Dynamics`. config: :class:`MPPIConfig`. env: optional Push-v0 env.
+        dynamics: any :class:`Dynamics`. config: :class:`MPPIConfig`. env, model: see
+            :class:`SamplingPlanner`.
     """
 
     config: MPPIConfig
     config_class = MPPIConfig
 
-    def _optimise(self, phys: np.ndarray, mocap: np.ndarray) -> tuple[float, int, int]:
+    def _optimise(self, state: np.ndarray) -> tuple[float, int, int]:
         cfg = self.config
         mean, best_cost, diverged = self.plan_actions.copy(), np.inf, 0
         for _ in range(cfg.iterations):
-            actions, cost, ok = self._scored_samples(mean, cfg.noise_std, phys, mocap)
+            actions = self._sample(mean, cfg.noise_std)
+            cost, states = self.costs(state, actions)
+            ok = np.isfinite(cost)
             diverged += int((~ok).sum())
             if not ok.any():
                 continue
             lowest = float(cost[ok].min())
+            if lowest < best_cost and states is not None:
+                self.prediction = states[int(np.argmin(np.where(ok, cost, np.inf)))]
             best_cost = min(best_cost, lowest)
             # Shifting by the minimum keeps exp() in range; diverged candidates get weight 0.
             w = np.zeros(len(cost))
@@ -298,47 +405,94 @@ class MPPIPlanner(SamplingPlanner):
         return best_cost, diverged, cfg.iterations * cfg.population
 
 
+#: Planning budgets per scene (the benchmark's, ``docs/experiments.md`` "Issue 13"): Push plans 20
+#: steps (0.4 s) ahead with smooth, saturating candidates and re-plans every 2 actions (so the
+#: learned model costs <= 1 CPU-s per action on one core); Toss plans one release.
+PRESETS: dict[str, dict[str, Any]] = {
+    "push": {"horizon": 20, "population": 20, "iterations": 2, "noise_std": 1.0,
+             "noise_correlation": 0.8, "terminal_weight": 10.0, "replan_every": 2,
+             "approach_weight": 30.0},
+    "toss": {"horizon": 1, "population": 16, "iterations": 3, "noise_std": 1.0,
+             "approach_weight": 0.0},
+}
+
+
+def planner_config(planner: str, scene_type: str, **overrides: Any) -> CEMConfig | MPPIConfig:
+    """The preset configuration of ``planner`` (``"cem"`` or ``"mppi"``) for ``scene_type``
+    (``"push"``, ``"toss"``), with ``overrides`` (``None`` values ignored)."""
+    if planner not in ("cem", "mppi"):
+        raise ValueError(f"unknown planner {planner!r}: use 'cem' or 'mppi'")
+    args = {**PRESETS.get(scene_type, {}), **{k: v for k, v in overrides.items() if v is not None}}
+    if planner == "cem":
+        args.setdefault("elites", max(2, args.get("population", 48) // 6))
+        return CEMConfig(**args)
+    return MPPIConfig(**args)
+
+
+def make_planner(
+    planner: str, dynamics: Dynamics, scene_type: str, env: gym.Env | None = None, **overrides: Any
+) -> SamplingPlanner:
+    """A :class:`CEMPlanner` or :class:`MPPIPlanner` with :func:`planner_config`'s settings."""
+    config = planner_config(planner, scene_type, **overrides)
+    cls = CEMPlanner if planner == "cem" else MPPIPlanner
+    return cls(dynamics, config, env=env)
+
+
 def run_episode(
-    env: gym.Env, planner: SamplingPlanner, seed: int | None = None, max_steps: int | None = None
+    env: gym.Env,
+    planner: SamplingPlanner,
+    seed: int | None = None,
+    max_steps: int | None = None,
+    on_step: Any = None,
 ) -> dict[str, Any]:
-    """One Push-v0 episode acted in ``env`` with ``planner`` replanning every step.
+    """One episode acted in ``env`` with ``planner`` replanning every step.
 
     The planner's dynamics may differ from the environment's (plan with FIGNet, act with MuJoCo).
 
     Args:
-        env: a Push-v0 environment (``gym.make`` adds the 50-step limit).
+        env: a Push or Toss environment (``gym.make`` adds the registered time limit).
         planner: reset (with its config's seed) and bound to ``env`` first.
         seed: of ``env.reset``.
         max_steps: stop after this many steps even if the episode has not ended.
+        on_step: optional ``callable(env, planner)`` called after every step (e.g. rendering).
 
     Returns:
-        ``{"return", "length", "is_success", "position_error" (m), "orientation_error" (rad),
-        "diverged" (the acting env's dynamics blew up), "plan_seconds" (mean per step),
-        "diverged_candidates" (fraction of planned rollouts that diverged)}``.
+        ``{"return", "length", "diverged" (the acting env's dynamics blew up), "plan_seconds"
+        and "plan_cpu_seconds" (mean wall and CPU time per action), "diverged_candidates"
+        (fraction of planned rollouts that diverged)}``, plus on Push ``"is_success"``,
+        ``"position_error"`` (m), ``"orientation_error"`` (rad) and on Toss ``"num_in_target"``.
     """
     env.reset(seed=seed)
     planner.reset()
     planner.bind(env)
-    total, length, seconds, bad, evaluated = 0.0, 0, 0.0, 0, 0
+    total, length, seconds, cpu, bad, evaluated = 0.0, 0, 0.0, 0.0, 0, 0
     info: dict[str, Any] = {}
     done = False
     while not done and (max_steps is None or length < max_steps):
         action = planner.plan(env)
         assert planner.last is not None
         seconds += planner.last.seconds
+        cpu += planner.last.cpu_seconds
         bad += planner.last.diverged
         evaluated += planner.last.evaluated
         _, reward, terminated, truncated, info = env.step(action)
         total += float(reward)
         length += 1
         done = terminated or truncated
-    return {
+        if on_step is not None:
+            on_step(env, planner)
+    out: dict[str, Any] = {
         "return": total,
         "length": length,
-        "is_success": bool(info.get("is_success", False)),
-        "position_error": float(info.get("position_error", np.nan)),
-        "orientation_error": float(info.get("orientation_error", np.nan)),
         "diverged": "diverged" in info,
         "plan_seconds": seconds / max(length, 1),
+        "plan_cpu_seconds": cpu / max(length, 1),
         "diverged_candidates": bad / max(evaluated, 1),
     }
+    if "position_error" in info:
+        out["is_success"] = bool(info.get("is_success", False))
+        out["position_error"] = float(info["position_error"])
+        out["orientation_error"] = float(info["orientation_error"])
+    if "num_in_target" in info:
+        out["num_in_target"] = int(info["num_in_target"])
+    return out

@@ -68,6 +68,7 @@ class PPOConfig:
         n_epochs: passes over the rollout buffer per update.
         learning_rate, gamma, gae_lambda, clip_range, ent_coef: PPO's usual meanings.
         net_arch: hidden layer sizes of the policy and value MLPs.
+        log_std_init: initial log standard deviation of the Gaussian policy's actions.
         seed: of PPO and the environments.
         torch_threads: torch threads during training; ``None``: 1 when the dynamics is not MuJoCo
             (a learned model in this process: policy and simulator would fight over the same
@@ -87,6 +88,7 @@ class PPOConfig:
     clip_range: float = 0.2
     ent_coef: float = 0.0
     net_arch: tuple[int, ...] = (64, 64)
+    log_std_init: float = 0.0
     seed: int = 0
     torch_threads: int | None = None
     checkpoint_every: int | None = None
@@ -189,7 +191,7 @@ def train_ppo(
             gae_lambda=cfg.gae_lambda,
             clip_range=cfg.clip_range,
             ent_coef=cfg.ent_coef,
-            policy_kwargs={"net_arch": list(cfg.net_arch)},
+            policy_kwargs={"net_arch": list(cfg.net_arch), "log_std_init": cfg.log_std_init},
             seed=cfg.seed,
             device="cpu",  # a 64x64 MLP: a GPU would only add transfers
             verbose=verbose,

@@ -1,18 +1,16 @@
-"""Push-v0 as a planning problem: the env's own action semantics and reward on predicted states.
+"""Planning problems: an environment's own task as the cost of candidate actions under any dynamics.
 
-A planner proposes ``B`` tip-velocity sequences ``float[B, T, 2]``, a :class:`Dynamics` predicts the
-states they lead to, and the planner ranks them by the environment's reward. :class:`PushTask`
-connects the three without re-implementing the environment:
+A planner proposes ``B`` action sequences ``float[B, T, A]``; a :class:`PlanningProblem` turns
+them into **one** batched ``Dynamics.rollout`` call from the environment's whole state
+(``env.get_state()``: full physics and mocap poses) and scores the predicted states with the
+environment's task (:mod:`fignet_gym.envs.tasks`, the functions its ``step`` calls): the cost is
+minus the reward ``env.step`` would return for the same states.
 
-* actions become mocap controls through ``PushEnv._pre_step`` (the env's clipping, speed and tip
-  bounds), applied step by step on a scratch copy of the environment;
-* predicted states are scored through ``PushEnv._evaluate`` (the reward terms whose sum
-  ``env.step`` returns), again on the scratch copy.
-
-The environment has no public, vectorised function ``(state, action) -> reward terms``: its reward
-reads ``self.data``. This adapter is the minimal bridge: it writes each predicted state into the
-scratch environment's ``MjData`` and calls the environment's code, one state at a time (a Python
-loop over ``B * T`` states, some 30 us each: as long as MuJoCo's own rollout of them).
+* :class:`PushProblem` (Push-v0/v1): ``T`` tip-velocity steps of ``frame_skip`` timesteps each,
+  plus an optional shaping term drawing the final tip to the pushing point behind the object.
+* :class:`TossProblem` (Toss-v0): one decision per release (``T = 1``); each candidate is the
+  release of the next object followed by a whole settle of the scene (``settle_steps`` recorded
+  states of ``frame_skip`` timesteps).
 """
 
 from __future__ import annotations
@@ -21,170 +19,186 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
-from fignet_gym.dynamics import STATE_SPEC
-from fignet_gym.envs.base import yaw_of
+from fignet_gym.dynamics import STATE_SPEC, DivergenceError, Dynamics
+from fignet_gym.envs.base import MjDynamicsEnv
 from fignet_gym.envs.push import PushEnv
-from fignet_gym.mjcf import push_object
+from fignet_gym.envs.toss import TossEnv
 
-#: State layout accepted by planners in place of an environment: everything ``mj_step`` needs plus
-#: the mocap poses (where the tip is), ``mujoco.mj_getState(model, data, s, PLAN_STATE_SPEC)``.
-PLAN_STATE_SPEC = int(mujoco.mjtState.mjSTATE_INTEGRATION)
-
-
-def push_env_of(env: gym.Env) -> PushEnv:
-    """The :class:`PushEnv` under Gymnasium wrappers (``TypeError`` for another environment)."""
-    inner = getattr(env, "unwrapped", env)
-    if not isinstance(inner, PushEnv):
-        raise TypeError(f"planners need a fignet_gym/Push-v0 environment, got {type(inner).__name__}")
-    return inner
+#: State layout accepted by planners in place of an environment (``env.get_state()``).
+PLAN_STATE_SPEC = STATE_SPEC
 
 
 def plan_state(env: gym.Env) -> np.ndarray:
-    """``float64[nstate]`` :data:`PLAN_STATE_SPEC` state of ``env`` (physics and mocap poses)."""
-    push = push_env_of(env)
-    out = np.zeros(mujoco.mj_stateSize(push.model, PLAN_STATE_SPEC))
-    mujoco.mj_getState(push.model, push.data, out, PLAN_STATE_SPEC)
-    return out
+    """``float64[nstate]`` :data:`PLAN_STATE_SPEC` state of ``env`` (wrappers allowed)."""
+    return _inner(env).get_state()
 
 
-class PushTask:
-    """Push-v0's action semantics and reward evaluated on states predicted by any dynamics.
+def _inner(env: gym.Env) -> MjDynamicsEnv:
+    inner = getattr(env, "unwrapped", env)
+    if not isinstance(inner, MjDynamicsEnv):
+        raise TypeError(
+            f"planners need a fignet_gym environment (Push-v0/v1, Toss-v0), got {type(inner).__name__}"
+        )
+    return inner
+
+
+def check_same_scene(planning: mujoco.MjModel, acting: mujoco.MjModel) -> None:
+    """``ValueError`` unless ``planning`` has ``acting``'s bodies, joints and mocap bodies (the
+    same state layout), so that the env's states mean the same thing to the planning model."""
+    def bodies(m: mujoco.MjModel) -> list[str]:
+        return [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, i) or "" for i in range(m.nbody)]
+
+    problems = []
+    for field in ("nq", "nv", "nmocap", "nbody", "njnt"):
+        a, b = getattr(planning, field), getattr(acting, field)
+        if a != b:
+            problems.append(f"{field} {a} vs {b}")
+    if not problems and bodies(planning) != bodies(acting):
+        problems.append(f"bodies {bodies(planning)} vs {bodies(acting)}")
+    if problems:
+        raise ValueError(
+            "the planner's model does not match the environment's scene "
+            f"({'; '.join(problems)}): plan with a model of the same scene"
+        )
+
+
+class PlanningProblem:
+    """What a planner needs from an environment: its state, its action box, a batched cost.
 
     Args:
-        env: the environment being controlled. Its goal (and workspace origin) is read at every
-            call, so one task follows the environment across resets.
+        env: the environment to plan for (wrappers allowed).
+        model: the model to roll out (default: the env's); it must have the env's state layout.
 
     Attributes:
-        env: the controlled :class:`PushEnv`.
-        model: its ``MjModel`` (shared with the planning dynamics).
-        nstep: MuJoCo timesteps per environment step (the rollouts' ``frame_skip``).
+        env: the unwrapped environment. model: the planning model.
+        action_dim: ``A``. horizon: the planned steps ``T`` (``None``: the planner's choice).
     """
 
-    def __init__(self, env: gym.Env) -> None:
-        self.env = push_env_of(env)
-        self.model = self.env.model
-        self.nstep = self.env.nstep
-        # Same model and configuration, its own MjData: evaluating never touches the live env.
-        self._scratch = self.env._spawn()
-        self._tip = self.env._tip_mocap
-        self._qadr = self.env._qadr
-        self._nq = self.model.nq
-        self._nv = self.model.nv
-        self._nm = self.model.nmocap
-        self._outline = push_object(self.env.shape).outline  # float[K, 2], object frame
-        tip_geom = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_GEOM, "tip")
-        self._tip_radius = float(self.model.geom_size[tip_geom, 0])
+    action_dim = 2
+    horizon: int | None = None
 
-    def _sync(self) -> None:
-        """Copy the task (goal, workspace origin) of the live environment into the scratch copy."""
-        self._scratch.goal = self.env.goal.copy()
-        self._scratch._start_xy = self.env._start_xy.copy()
+    def __init__(self, env: gym.Env, model: mujoco.MjModel | None = None) -> None:
+        self.env = _inner(env)
+        self.model = self.env.model if model is None else model
+        if model is not None:
+            check_same_scene(model, self.env.model)
 
-    def load(self, state: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        """Initial rollout state and current mocap poses.
+    def validate(self, dynamics: Dynamics) -> None:
+        """``ValueError`` naming the env if ``dynamics`` cannot roll out this problem's model."""
+        try:
+            dynamics.validate(self.model, self.frame_skip, self.env.scene_type)
+        except ValueError as err:
+            raise ValueError(
+                f"the planner's dynamics cannot plan for {type(self.env).__name__} "
+                f"('{self.env.scene_type}' scene): {err}"
+            ) from None
 
-        Args:
-            state: ``float64[nstate]`` :data:`PLAN_STATE_SPEC` state, or ``None`` for the live
-                environment's current state.
+    @property
+    def frame_skip(self) -> int:
+        """MuJoCo timesteps per recorded rollout state."""
+        return self.env.nstep
 
-        Returns:
-            ``float64[nphys]`` ``mjSTATE_FULLPHYSICS`` state (``Dynamics.rollout``'s layout) and
-            ``float64[nmocap * 7]`` mocap positions then quaternions (controls' layout).
-        """
-        data = self._scratch.data
-        source = self.env.data if state is None else data
-        if state is not None:
-            expected = mujoco.mj_stateSize(self.model, PLAN_STATE_SPEC)
-            state = np.asarray(state, dtype=np.float64)
-            if state.shape != (expected,):
-                raise ValueError(
-                    f"state must be float64[{expected}] (mjSTATE_INTEGRATION, see plan_state), "
-                    f"got shape {state.shape}"
-                )
-            mujoco.mj_setState(self.model, data, state, PLAN_STATE_SPEC)
-        phys = np.zeros(mujoco.mj_stateSize(self.model, STATE_SPEC))
-        mujoco.mj_getState(self.model, source, phys, STATE_SPEC)
-        mocap = np.concatenate([source.mocap_pos.ravel(), source.mocap_quat.ravel()])
-        return phys, mocap
+    def rollout(self, dynamics: Dynamics, state: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        """Predicted states ``float64[B, T', nstate]`` of candidates ``float[B, T, A]`` from
+        ``state float64[nstate]``, in one ``dynamics.rollout`` call (NaN rows: diverged)."""
+        raise NotImplementedError
 
-    def controls(self, mocap: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Mocap controls of action sequences, through the environment's own ``_pre_step``.
+    def costs(
+        self, states: np.ndarray, actions: np.ndarray, shaping: float, terminal: float
+    ) -> np.ndarray:
+        """``float64[B]`` cost of predicted states ``float64[B, T', nstate]`` (non-finite where
+        they are): minus their reward, ``terminal`` more times the last step's, plus ``shaping``
+        times a task-specific shaping term."""
+        raise NotImplementedError
 
-        Args:
-            mocap: ``float64[nmocap * 7]`` current mocap poses (from :meth:`load`).
-            actions: ``float[B, T, 2]`` tip velocities in action units.
+    def evaluate(
+        self,
+        dynamics: Dynamics,
+        state: np.ndarray,
+        actions: np.ndarray,
+        shaping: float = 0.0,
+        terminal: float = 0.0,
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """Costs ``float64[B]`` of candidates and their predicted states (``None`` when the
+        dynamics raised :class:`DivergenceError`: every cost is then ``inf``)."""
+        try:
+            states = self.rollout(dynamics, state, actions)
+        except DivergenceError:  # a user Dynamics may raise instead of returning NaN rows
+            return np.full(len(actions), np.inf), None
+        cost = self.costs(states, actions, shaping, terminal)
+        cost[~np.isfinite(cost)] = np.inf
+        return cost, states
 
-        Returns:
-            ``float64[B, T, nmocap * 7]`` controls (mocap targets after each step, the layout of
-            ``Dynamics.rollout``) and ``float64[B, T, 2]`` the actions as the env applies them
-            (clipped).
-        """
-        B, T, _ = actions.shape
-        nm = self._nm
-        data = self._scratch.data
-        control = np.empty((B, T, nm * 7))
-        applied = np.empty((B, T, actions.shape[2]))
-        start_pos, start_quat = mocap[: 3 * nm].reshape(nm, 3), mocap[3 * nm :].reshape(nm, 4)
-        for b in range(B):
-            data.mocap_pos[:] = start_pos
-            data.mocap_quat[:] = start_quat
-            for t in range(T):
-                applied[b, t] = self._scratch._pre_step(actions[b, t])
-                control[b, t, : 3 * nm] = data.mocap_pos.ravel()
-                control[b, t, 3 * nm :] = data.mocap_quat.ravel()
-        return control, applied
 
-    def rewards(self, states: np.ndarray, control: np.ndarray, applied: np.ndarray) -> np.ndarray:
-        """The environment's reward for each predicted step.
+class PushProblem(PlanningProblem):
+    """Push-v0/v1: minus the env's reward summed over the predicted steps (``env.task``), plus
+    ``shaping`` times the final tip's distance (m) to the pushing point behind the object."""
 
-        Args:
-            states: ``float64[B, T, nphys]`` predicted ``mjSTATE_FULLPHYSICS`` states.
-            control: ``float64[B, T, nmocap * 7]`` the controls that produced them.
-            applied: ``float64[B, T, 2]`` the (clipped) actions of each step.
+    env: PushEnv
 
-        Returns:
-            ``float64[B, T]`` rewards exactly as ``env.step`` would return them; NaN where the
-            predicted state is not finite (a diverged rollout).
-        """
-        self._sync()
-        B, T, _ = states.shape
-        nm, nq, nv = self._nm, self._nq, self._nv
-        out = np.full((B, T), np.nan)
-        finite = np.isfinite(states).all(-1)
-        data = self._scratch.data
-        for b, t in zip(*np.nonzero(finite), strict=True):
-            data.qpos[:] = states[b, t, 1 : 1 + nq]
-            data.qvel[:] = states[b, t, 1 + nq : 1 + nq + nv]
-            data.mocap_pos[:] = control[b, t, : 3 * nm].reshape(nm, 3)
-            data.mocap_quat[:] = control[b, t, 3 * nm :].reshape(nm, 4)
-            # The env's reward is the sum of its reward terms (``MjDynamicsEnv._post_step``);
-            # calling ``_evaluate`` skips building the observation, half of the cost.
-            terms = self._scratch._evaluate(applied[b, t])[0]
-            out[b, t] = sum(terms.values())
-        return out
+    def __init__(self, env: gym.Env, model: mujoco.MjModel | None = None) -> None:
+        super().__init__(env, model)
+        if not isinstance(self.env, PushEnv):
+            raise TypeError(f"PushProblem needs a Push environment, got {type(self.env).__name__}")
 
-    def approach_distance(self, states: np.ndarray, control: np.ndarray) -> np.ndarray:
-        """Distance (m) of the final tip from the pushing point behind the object.
+    def rollout(self, dynamics: Dynamics, state: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        control = self.env.task.controls(state[None], actions)
+        return dynamics.rollout(self.model, state[None], control, frame_skip=self.frame_skip)
 
-        A planner-side shaping term, *not* part of the environment's reward: with a short horizon
-        most candidate plans never touch the object and the reward alone cannot rank them. The
-        pushing point is where the tip touches the object's outline when it comes from the side
-        opposite the goal, on the line through the object's origin (for the final predicted pose).
+    def costs(
+        self, states: np.ndarray, actions: np.ndarray, shaping: float, terminal: float
+    ) -> np.ndarray:
+        task, goal = self.env.task, self.env.goal
+        reward = task.reward(states, goal, actions)
+        cost = -reward.sum(axis=1) - terminal * reward[:, -1]
+        if shaping:
+            cost = cost + shaping * task.approach_distance(states[:, -1], goal)
+        return cost
 
-        Args:
-            states: ``float64[B, T, nphys]``; control: ``float64[B, T, nmocap * 7]``.
 
-        Returns:
-            ``float64[B]`` (NaN for diverged rollouts).
-        """
-        final = states[:, -1, 1 + self._qadr : 1 + self._qadr + 7]
-        obj, yaw = final[:, :2], yaw_of(final[:, 3:])
-        to_goal = self.env.goal[:2] - obj
-        unit = to_goal / np.maximum(np.linalg.norm(to_goal, axis=-1, keepdims=True), 1e-9)
-        # Support of the outline in direction -unit, taken in the object frame.
-        c, s = np.cos(yaw), np.sin(yaw)
-        back = np.stack([-(c * unit[:, 0] + s * unit[:, 1]), s * unit[:, 0] - c * unit[:, 1]], -1)
-        reach = (back @ self._outline.T).max(-1) + self._tip_radius
-        behind = obj - reach[:, None] * unit
-        tip = control[:, -1, 3 * self._tip : 3 * self._tip + 2]
-        return np.linalg.norm(tip - behind, axis=-1)
+class TossProblem(PlanningProblem):
+    """Toss-v0: one release per decision; the cost is minus the reward of that step (distance of
+    the tossed object to the target, objects brought into or knocked out of it) after a whole
+    settle, predicted from the released state."""
+
+    env: TossEnv
+    horizon = 1
+
+    def __init__(self, env: gym.Env, model: mujoco.MjModel | None = None) -> None:
+        super().__init__(env, model)
+        if not isinstance(self.env, TossEnv):
+            raise TypeError(f"TossProblem needs a Toss environment, got {type(self.env).__name__}")
+
+    @property
+    def frame_skip(self) -> int:
+        return self.env.frame_skip
+
+    def rollout(self, dynamics: Dynamics, state: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        env = self.env
+        k = env.released
+        if k >= env.task.num_objects:
+            raise RuntimeError("every object was tossed: reset the environment")
+        released = env.task.release(state[None], k, float(env.release_yaws[k]), actions[:, 0])
+        # Only the settled state counts (a learned model still steps every 0.02 s).
+        return dynamics.rollout(
+            self.model, released, None, nstep=env.settle_steps, frame_skip=self.frame_skip
+        )[:, -1:]
+
+    def costs(
+        self, states: np.ndarray, actions: np.ndarray, shaping: float, terminal: float
+    ) -> np.ndarray:
+        env = self.env
+        k = env.released
+        before = env.task.in_target(env.get_state(), env.target, k)
+        terms = env.task.reward_terms(states[:, -1], env.target, k, before)
+        return -(terms["reward_distance"] + terms["reward_in_target"])
+
+
+def problem_for(env: gym.Env, model: mujoco.MjModel | None = None) -> PlanningProblem:
+    """The planning problem of a Push or Toss environment (``TypeError`` for another one)."""
+    inner = _inner(env)
+    if isinstance(inner, PushEnv):
+        return PushProblem(inner, model)
+    if isinstance(inner, TossEnv):
+        return TossProblem(inner, model)
+    raise TypeError(f"no planning problem for {type(inner).__name__}: Push or Toss environments")

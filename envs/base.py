@@ -22,7 +22,8 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
-from fignet_gym.dynamics import DivergenceError, Dynamics, make_dynamics
+from fignet_gym.dynamics import STATE_SPEC, DivergenceError, Dynamics, make_dynamics
+from fignet_gym.envs.tasks import wrap_angle, yaw_of  # noqa: F401  (re-exported)
 
 
 class MjDynamicsEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -80,6 +81,24 @@ class MjDynamicsEnv(gym.Env[np.ndarray, np.ndarray]):
         self._renderer: mujoco.Renderer | None = None
         self._np_random = None
         self._np_random_seed = None
+
+    def get_state(self) -> np.ndarray:
+        """``float64[nstate]`` the whole current state (:data:`~fignet_gym.dynamics.STATE_SPEC`:
+        full physics and mocap poses): what ``Dynamics.rollout`` starts from and the tasks of
+        :mod:`fignet_gym.envs.tasks` score."""
+        out = np.empty(mujoco.mj_stateSize(self.model, STATE_SPEC))
+        mujoco.mj_getState(self.model, self.data, out, STATE_SPEC)
+        return out
+
+    def set_state(self, state: np.ndarray) -> None:
+        """Load a :meth:`get_state` state ``float64[nstate]`` into ``data`` and forward it (the
+        task, e.g. the goal, is unchanged)."""
+        mujoco.mj_setState(self.model, self.data, np.asarray(state, dtype=np.float64), STATE_SPEC)
+        mujoco.mj_forward(self.model, self.data)
+
+    def observe(self) -> np.ndarray:
+        """The observation ``float32[D]`` of the current state (what ``step`` would return)."""
+        return self._observe()
 
     def _spawn(self) -> MjDynamicsEnv:
         """A new environment sharing this one's model, dynamics and configuration (fresh state)."""
@@ -239,17 +258,6 @@ def check_arguments(owner: str, **checks: tuple[Any, str]) -> None:
             raise ValueError(f"{owner}: {name} must be {what}, got {value!r}")
 
 
-def yaw_of(quat: np.ndarray) -> np.ndarray:
-    """Heading (rad) about +z of unit quaternions (w, x, y, z): ``float[..., 4] -> float[...]``."""
-    w, x, y, z = np.moveaxis(np.asarray(quat, dtype=np.float64), -1, 0)
-    return np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-
-
-def wrap_angle(a: np.ndarray | float) -> np.ndarray:
-    """Angle(s) wrapped to ``[-pi, pi)``."""
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
-
-
 def layout(*entries: tuple[str, int]) -> dict[str, slice]:
     """Consecutive named slices of an observation vector from ``(name, size)`` pairs."""
     out, start = {}, 0
@@ -262,6 +270,17 @@ def layout(*entries: tuple[str, int]) -> dict[str, slice]:
 def layout_size(lay: dict[str, slice]) -> int:
     """Total length of a :func:`layout`."""
     return max((s.stop for s in lay.values()), default=0)
+
+
+def free_camera(
+    lookat: Sequence[float], distance: float, azimuth: float, elevation: float
+) -> mujoco.MjvCamera:
+    """A free ``MjvCamera`` aimed at ``lookat float[3]`` from ``distance`` (m), ``azimuth`` and
+    ``elevation`` (deg)."""
+    cam = mujoco.MjvCamera()
+    cam.lookat[:] = lookat
+    cam.distance, cam.azimuth, cam.elevation = distance, azimuth, elevation
+    return cam
 
 
 def add_disc(

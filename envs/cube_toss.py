@@ -11,11 +11,10 @@ from typing import Any
 import mujoco
 import numpy as np
 from gymnasium import spaces
-from gymnasium.vector import AutoresetMode
 
 from fignet_gym.dynamics import Dynamics
-from fignet_gym.envs.base import MjDynamicsEnv, add_disc, layout, layout_size
-from fignet_gym.envs.vector import BatchedVectorEnv
+from fignet_gym.envs.base import MjDynamicsEnv, add_disc, free_camera, layout, layout_size
+from fignet_gym.envs.vector import SingleEnvVectorEnv
 from fignet_gym.mjcf import restitution_to_dampratio
 
 #: The ContactNets cube (``params_processed/experiment.json``, lengths in metres): half-width,
@@ -344,32 +343,17 @@ class CubeTossEnv(MjDynamicsEnv):
         return terms, True, False, info
 
     def _camera(self) -> mujoco.MjvCamera:
-        cam = mujoco.MjvCamera()
-        cam.lookat[:] = (*self.release_position[:2], 0.05)
-        cam.distance, cam.azimuth, cam.elevation = 1.6, -135.0, -40.0
-        return cam
+        return free_camera((*self.release_position[:2], 0.05), 1.6, -135.0, -40.0)
 
     def _decorate(self, scene: mujoco.MjvScene) -> None:
         add_disc(scene, (*self.target, 0.001), self.target_radius, (0.1, 0.8, 0.2, 0.5))
 
 
-class CubeTossVectorEnv(BatchedVectorEnv):
-    """``num_envs`` :class:`CubeTossEnv` stepped by one batched dynamics call.
+class CubeTossVectorEnv(SingleEnvVectorEnv):
+    """``num_envs`` :class:`CubeTossEnv` stepped by one batched dynamics call; arguments as
+    :class:`~fignet_gym.envs.vector.SingleEnvVectorEnv`.
 
-    The ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` entry point.
-
-    Args:
-        num_envs: number of sub-environments.
-        max_episode_steps: per-episode step limit (``None``: an episode is one toss).
-        autoreset_mode: Gymnasium ``AutoresetMode`` (default ``NEXT_STEP``).
-        kwargs: :class:`CubeTossEnv` arguments, shared by every sub-environment.
+    ``max_episode_steps=None``: an episode is one toss.
     """
 
-    def __init__(
-        self,
-        num_envs: int = 1,
-        max_episode_steps: int | None = None,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(CubeTossEnv(**kwargs), num_envs, max_episode_steps, autoreset_mode)
+    env_class = CubeTossEnv

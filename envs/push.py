@@ -1,4 +1,4 @@
-"""``fignet_gym/Push-v0``: planar pushing in the MIT Pushing setting."""
+"""``fignet_gym/Push-v0`` and ``Push-v1``: planar pushing in the MIT Pushing setting."""
 
 from __future__ import annotations
 
@@ -7,7 +7,6 @@ from typing import Any
 import mujoco
 import numpy as np
 from gymnasium import spaces
-from gymnasium.vector import AutoresetMode
 
 from fignet_gym.dynamics import Dynamics
 from fignet_gym.envs.base import (
@@ -18,7 +17,8 @@ from fignet_gym.envs.base import (
     wrap_angle,
     yaw_of,
 )
-from fignet_gym.envs.vector import BatchedVectorEnv
+from fignet_gym.envs.tasks import PushTask
+from fignet_gym.envs.vector import SingleEnvVectorEnv
 from fignet_gym.mjcf import push_object, push_scene_xml
 
 
@@ -28,7 +28,9 @@ class PushEnv(MjDynamicsEnv):
     One object of the MIT Pushing dataset (13 mm thick prism, the dataset's mass and inertia) lies
     on a floor; a vertical cylinder of radius 4.75 mm (a mocap body: kinematic for the learned
     model) moves in the plane at a bounded speed. Each episode draws the object's heading, a goal
-    pose near the object and a start position of the tip next to it. One environment step is one
+    pose near the object and a start position of the tip next to it (``tip_start``). The reward,
+    success and truncation rules are :class:`fignet_gym.envs.tasks.PushTask` (``env.task``), the
+    functions a planner's cost calls on predicted states. One environment step is one
     learned step: ``frame_skip`` MuJoCo timesteps of 2 ms (0.02 s by default, the training data's).
 
     ## Action space
@@ -67,15 +69,17 @@ class PushEnv(MjDynamicsEnv):
     | reward_position | ``-position_weight * |goal_xy - object_xy|`` |
     | reward_orientation | ``-orientation_weight * |wrap(goal_yaw - object_yaw)|`` |
     | reward_action | ``-action_weight * |action|^2`` |
+    | reward_success | ``success_weight`` on the step that succeeds (only when ``success_weight`` > 0) |
 
     ``info`` also holds ``position_error`` (m), ``orientation_error`` (rad) and ``is_success``;
     ``info["diverged"]`` names the failure when the dynamics blew up.
 
     ## Episode end
 
-    Terminated on success (both errors within tolerance). Truncated after 50 steps (1 s, the
-    registered time limit), when the object leaves the workspace (``workspace`` m from its start,
-    or lifted/tilted off the floor: ``info["out_of_workspace"]``), or when the dynamics diverged.
+    Terminated on success (both errors within tolerance). Truncated at the registered time limit
+    (v0: 50 steps, 1 s; v1: 75 steps, 1.5 s), when the object leaves the workspace (``workspace``
+    m from its start, its height off by ``max_lift``, or tilted below ``min_upright``:
+    ``info["out_of_workspace"]``), or when the dynamics diverged.
 
     ## Arguments
 
@@ -89,17 +93,40 @@ class PushEnv(MjDynamicsEnv):
     | max_speed | ``0.1`` | tip speed (m/s) at ``|action| = 1`` per axis |
     | frame_skip | ``10`` | MuJoCo timesteps (2 ms) per environment step |
     | goal_distance | ``0.05`` | goal drawn within this distance (m) of the object |
+    | goal_distance_min | ``0.0`` | and at least this far (m; uniform over the annulus) |
     | goal_yaw | ``0.5`` | goal heading drawn within this angle (rad) of the object's |
+    | tip_start | ``"around"`` | ``"around"``: circling the corners; ``"behind"``: opposite the goal |
+    | tip_gap | ``0.005`` | ``"behind"``: clearance (m) between tip and outline |
+    | tip_jitter | ``0.01`` | ``"behind"``: uniform sideways offset (m) of the start |
     | position_weight | ``10.0`` | reward weight of the position error (1/m) |
     | orientation_weight | ``1.0`` | reward weight of the heading error (1/rad) |
     | action_weight | ``0.01`` | reward weight of the squared action |
+    | success_weight | ``0.0`` | reward of the step that succeeds |
     | success_position | ``0.01`` | position tolerance (m) for success |
     | success_yaw | ``0.1`` | heading tolerance (rad) for success |
     | workspace | ``0.3`` | truncate when the object moves this far (m) from its start |
+    | max_lift | ``0.02`` | truncate when the object's height is off its resting height by more (m) |
+    | min_upright | ``0.9`` | truncate when the cosine of its tilt from upright drops below this |
     | render_mode | ``None`` | ``"rgb_array"`` or ``None`` |
     | width | ``480`` | rendered frame width (px) |
     | height | ``480`` | rendered frame height (px) |
     | dynamics_kwargs | ``None`` | extra dynamics arguments (e.g. fignet's ``max_distance``) |
+
+    ## Version History
+
+    * v1: a task a planner with a perfect model solves (MPC with MuJoCo as its model: see
+      ``docs/experiments.md``, "Issue 13"). The tip starts 5 mm behind the object on the side
+      away from the goal (``tip_start="behind"``, up to 1 cm sideways), instead of anywhere
+      around it: in v0 45% of episodes need more than the 50-step limit to get there. The goal
+      lies 2 to 5 cm away (``goal_distance_min=0.02``: never already solved; 5 cm is the travel
+      of an MIT Pushing push past contact) with a heading within 0.3 rad of the object's, and
+      success needs 1 cm and 0.2 rad (about 11 degrees: v0's 0.1 rad failed 9 of 10 scripted
+      pushes that reached the position). The time limit is 75 steps (1.5 s). The tip speed stays
+      0.1 m/s, the quasi-static end of the MIT Pushing speeds (10 to 500 mm/s): a block released
+      at 0.1 m/s with friction 0.25 slides v^2 / (2 mu g) = 2 mm, a fifth of the tolerance, so
+      the object goes where the pusher puts it.
+    * v0: the initial version (goal within 5 cm and 0.5 rad, success 1 cm and 0.1 rad, tip
+      anywhere around the object, 50 steps).
     """
 
     scene_type = "push"
@@ -126,13 +153,20 @@ class PushEnv(MjDynamicsEnv):
         max_speed: float = 0.1,
         frame_skip: int = 10,
         goal_distance: float = 0.05,
+        goal_distance_min: float = 0.0,
         goal_yaw: float = 0.5,
+        tip_start: str = "around",
+        tip_gap: float = 0.005,
+        tip_jitter: float = 0.01,
         position_weight: float = 10.0,
         orientation_weight: float = 1.0,
         action_weight: float = 0.01,
+        success_weight: float = 0.0,
         success_position: float = 0.01,
         success_yaw: float = 0.1,
         workspace: float = 0.3,
+        max_lift: float = 0.02,
+        min_upright: float = 0.9,
         render_mode: str | None = None,
         width: int = 480,
         height: int = 480,
@@ -145,6 +179,9 @@ class PushEnv(MjDynamicsEnv):
             position_weight=(position_weight, "finite"), orientation_weight=(orientation_weight, "finite"),
             action_weight=(action_weight, "finite"), success_position=(success_position, "positive"),
             success_yaw=(success_yaw, "positive"), workspace=(workspace, "positive"),
+            goal_distance_min=(goal_distance_min, "nonnegative"), tip_gap=(tip_gap, "nonnegative"),
+            tip_jitter=(tip_jitter, "nonnegative"), success_weight=(success_weight, "finite"),
+            max_lift=(max_lift, "positive"), min_upright=(min_upright, "finite"),
             width=(width, "count"), height=(height, "count"))
         obj = push_object(shape)
         model = mujoco.MjModel.from_xml_string(
@@ -153,11 +190,16 @@ class PushEnv(MjDynamicsEnv):
         self.shape = shape
         self.max_speed = float(max_speed)
         self.goal_distance, self.goal_yaw = float(goal_distance), float(goal_yaw)
-        self.position_weight = float(position_weight)
-        self.orientation_weight = float(orientation_weight)
-        self.action_weight = float(action_weight)
-        self.success_position, self.success_yaw = float(success_position), float(success_yaw)
-        self.workspace = float(workspace)
+        self.goal_distance_min = float(goal_distance_min)
+        if not 0.0 <= self.goal_distance_min <= self.goal_distance:
+            raise ValueError(
+                f"PushEnv: need 0 <= goal_distance_min <= goal_distance, got "
+                f"{goal_distance_min} and {goal_distance}"
+            )
+        if tip_start not in ("around", "behind"):
+            raise ValueError(f"PushEnv: tip_start must be 'around' or 'behind', got {tip_start!r}")
+        self.tip_start = tip_start
+        self.tip_gap, self.tip_jitter = float(tip_gap), float(tip_jitter)
         self._rest_z = obj.thickness / 2
         tip_radius = float(
             model.geom_size[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "tip"), 0]
@@ -168,12 +210,24 @@ class PushEnv(MjDynamicsEnv):
             model.geom_size[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "floor"), 0]
         )
         self._tip_bound = floor - 0.05
-        body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "object")
-        self._qadr = int(model.jnt_qposadr[model.body_jntadr[body]])
-        self._dadr = int(model.jnt_dofadr[model.body_jntadr[body]])
-        self._tip_mocap = int(
-            model.body_mocapid[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "tip")]
+        self.task = PushTask(
+            model,
+            obj.outline,
+            self._rest_z,
+            max_speed=self.max_speed,
+            step_time=frame_skip * float(model.opt.timestep),
+            tip_bound=self._tip_bound,
+            position_weight=position_weight,
+            orientation_weight=orientation_weight,
+            action_weight=action_weight,
+            success_weight=success_weight,
+            success_position=success_position,
+            success_yaw=success_yaw,
+            workspace=workspace,
+            max_lift=max_lift,
+            min_upright=min_upright,
         )
+        self._qadr, self._dadr, self._tip_mocap = self.task.qadr, self.task.dadr, self.task.tip_mocap
         self._camera_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, "top")
         self._object_geom = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "object")
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
@@ -187,7 +241,7 @@ class PushEnv(MjDynamicsEnv):
     def _init_state(self) -> None:
         super()._init_state()
         self.goal = np.zeros(3)  # x, y, yaw
-        self._start_xy = np.zeros(2)
+        self.workspace_origin = np.zeros(2)  # where the object started (truncation)
 
     # ----------------------------------------------------------------- task
     def _object_pose(self) -> tuple[np.ndarray, float, float]:
@@ -200,8 +254,9 @@ class PushEnv(MjDynamicsEnv):
         q = self.data.qpos
         q[self._qadr : self._qadr + 3] = (0.0, 0.0, self._rest_z)
         q[self._qadr + 3 : self._qadr + 7] = (np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2))
-        self._start_xy = np.zeros(2)
-        r = self.goal_distance * np.sqrt(rng.uniform())
+        self.workspace_origin = np.zeros(2)
+        lo, hi = self.goal_distance_min, self.goal_distance
+        r = np.sqrt(rng.uniform(lo**2, hi**2))  # uniform over the annulus
         phi = rng.uniform(-np.pi, np.pi)
         self.goal = np.array(
             [
@@ -210,17 +265,22 @@ class PushEnv(MjDynamicsEnv):
                 wrap_angle(yaw + rng.uniform(-self.goal_yaw, self.goal_yaw)),
             ]
         )
-        psi = rng.uniform(-np.pi, np.pi)
-        self.data.mocap_pos[self._tip_mocap, :2] = self._tip_start * np.array(
-            [np.cos(psi), np.sin(psi)]
-        )
+        if self.tip_start == "around":
+            psi = rng.uniform(-np.pi, np.pi)
+            tip = self._tip_start * np.array([np.cos(psi), np.sin(psi)])
+        else:  # behind the object, seen from the goal, with a sideways offset
+            mujoco.mj_forward(self.model, self.data)
+            unit = np.array([np.cos(phi), np.sin(phi)])
+            side = np.array([-unit[1], unit[0]]) * rng.uniform(-self.tip_jitter, self.tip_jitter)
+            state = self.get_state()
+            contact = self.task.pushing_point(state, self.goal)
+            tip = contact - self.tip_gap * unit + side
+        self.data.mocap_pos[self._tip_mocap, :2] = tip
         self.data.mocap_quat[self._tip_mocap] = (1.0, 0.0, 0.0, 0.0)
 
     def _apply_action(self, action: np.ndarray) -> None:
         tip = self.data.mocap_pos[self._tip_mocap]
-        tip[:2] = np.clip(
-            tip[:2] + action * self.max_speed * self.step_time, -self._tip_bound, self._tip_bound
-        )
+        tip[:2] = self.task.tip_path(tip[:2], action[None])[0]
 
     def _observe(self) -> np.ndarray:
         xy, yaw, _ = self._object_pose()
@@ -248,27 +308,15 @@ class PushEnv(MjDynamicsEnv):
         return obs.astype(np.float32)
 
     def _evaluate(self, action: np.ndarray) -> tuple[dict[str, float], bool, bool, dict[str, Any]]:
-        xy, yaw, z = self._object_pose()
-        pos_err = float(np.linalg.norm(self.goal[:2] - xy))
-        yaw_err = float(abs(wrap_angle(self.goal[2] - yaw)))
-        terms = {
-            "reward_position": -self.position_weight * pos_err,
-            "reward_orientation": -self.orientation_weight * yaw_err,
-            "reward_action": -self.action_weight * float(np.sum(action**2)),
-        }
-        success = pos_err < self.success_position and yaw_err < self.success_yaw
-        quat = self.data.qpos[self._qadr + 3 : self._qadr + 7]
-        tilt = 1.0 - 2.0 * float(quat[1] ** 2 + quat[2] ** 2)  # cos of the tilt from upright
-        out = (
-            not np.isfinite(xy).all()
-            or float(np.linalg.norm(xy - self._start_xy)) > self.workspace
-            or abs(z - self._rest_z) > 0.02
-            or tilt < 0.9
-        )
+        state = self.get_state()
+        terms = {k: float(v) for k, v in self.task.reward_terms(state, self.goal, action).items()}
+        pos_err, yaw_err = self.task.errors(state, self.goal)
+        success = bool(self.task.is_success(state, self.goal))
+        out = bool(self.task.out_of_workspace(state, self.workspace_origin))
         info: dict[str, Any] = {
-            "position_error": pos_err,
-            "orientation_error": yaw_err,
-            "is_success": bool(success),
+            "position_error": float(pos_err),
+            "orientation_error": float(yaw_err),
+            "is_success": success,
         }
         if out:
             info["out_of_workspace"] = True
@@ -301,23 +349,11 @@ class PushEnv(MjDynamicsEnv):
         scene.ngeom += 1
 
 
-class PushVectorEnv(BatchedVectorEnv):
-    """``num_envs`` :class:`PushEnv` stepped by one batched dynamics call.
+class PushVectorEnv(SingleEnvVectorEnv):
+    """``num_envs`` :class:`PushEnv` stepped by one batched dynamics call; arguments as
+    :class:`~fignet_gym.envs.vector.SingleEnvVectorEnv`.
 
-    The ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` entry point.
-
-    Args:
-        num_envs: number of sub-environments.
-        max_episode_steps: per-episode step limit (``gym.make_vec`` passes the registered 50).
-        autoreset_mode: Gymnasium ``AutoresetMode`` (default ``NEXT_STEP``).
-        kwargs: :class:`PushEnv` arguments, shared by every sub-environment.
+    ``max_episode_steps``: ``gym.make_vec`` passes the registered 50.
     """
 
-    def __init__(
-        self,
-        num_envs: int = 1,
-        max_episode_steps: int | None = None,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(PushEnv(**kwargs), num_envs, max_episode_steps, autoreset_mode)
+    env_class = PushEnv

@@ -8,11 +8,11 @@ from typing import Any
 import mujoco
 import numpy as np
 from gymnasium import spaces
-from gymnasium.vector import AutoresetMode
 
-from fignet_gym.dynamics import Dynamics
-from fignet_gym.envs.base import MjDynamicsEnv, add_disc, check_arguments, layout, layout_size
-from fignet_gym.envs.vector import BatchedVectorEnv
+from fignet_gym.dynamics import STATE_SPEC, Dynamics
+from fignet_gym.envs.base import MjDynamicsEnv, add_disc, check_arguments, free_camera, layout, layout_size
+from fignet_gym.envs.tasks import TossTask
+from fignet_gym.envs.vector import SingleEnvVectorEnv
 from fignet_gym.mjcf import TossObject, toss_scene_xml, unit_shape_mesh
 
 #: The default objects: three metal cubes of Kubric's small size (flat faces: face-face contacts).
@@ -53,7 +53,9 @@ class TossEnv(MjDynamicsEnv):
 
     ``Box(-1, 1, (2,), float32)``, mapped linearly to
     ``[release_velocity_low, release_velocity_high]`` (the vertical release velocity is zero, as in
-    the training data); out-of-range values are clipped, NaN/inf raise ``ValueError``.
+    the training data); out-of-range values are clipped, NaN/inf raise ``ValueError``. The
+    release, reward and target rules are :class:`fignet_gym.envs.tasks.TossTask` (``env.task``),
+    which a planner calls on predicted states.
 
     | index | action | unit |
     |---|---|---|
@@ -191,9 +193,18 @@ class TossEnv(MjDynamicsEnv):
         model = mujoco.MjModel.from_xml_string(
             toss_scene_xml(self.objects, floor_half_size=floor_half_size, poses=self._park)
         )
-        bodies = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"obj{i}") for i in range(k)]
-        self._qadr = np.array([model.jnt_qposadr[model.body_jntadr[b]] for b in bodies])
-        self._dadr = np.array([model.jnt_dofadr[model.body_jntadr[b]] for b in bodies])
+        self.task = TossTask(
+            model,
+            self._radius,
+            self.release_position,
+            self.release_velocity_low,
+            self.release_velocity_high,
+            self.target_radius,
+            self.distance_weight,
+            self.in_target_weight,
+        )
+        self._qadr, self._dadr = self.task.qadr, self.task.dadr
+        self.frame_skip = int(frame_skip)
         self.observation_layout = toss_layout(k)
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.observation_space = spaces.Box(
@@ -215,7 +226,7 @@ class TossEnv(MjDynamicsEnv):
         self.target = np.zeros(2)
         self.released = 0
         self._in_before = 0
-        self._yaws = np.zeros(len(self.objects))
+        self.release_yaws = np.zeros(len(self.objects))  # heading of each object's release
 
     # ----------------------------------------------------------------- task
     def _positions(self) -> np.ndarray:
@@ -223,12 +234,11 @@ class TossEnv(MjDynamicsEnv):
         return self.data.qpos[self._qadr[:, None] + np.arange(3)].copy()
 
     def _in_target(self, count: int) -> int:
-        xy = self._positions()[:count, :2]
-        return int((np.linalg.norm(xy - self.target, axis=1) <= self.target_radius).sum())
+        return int(self.task.in_target(self.get_state(), self.target, count))
 
     def _reset_task(self, rng: np.random.Generator, options: dict[str, Any] | None) -> None:
         self.target = rng.uniform(self.target_low, self.target_high)
-        self._yaws = rng.uniform(-np.pi, np.pi, len(self.objects))
+        self.release_yaws = rng.uniform(-np.pi, np.pi, len(self.objects))
         self.released = 0
         self._in_before = 0
         # qpos0 holds the parked poses (mj_resetData ran before this).
@@ -241,28 +251,13 @@ class TossEnv(MjDynamicsEnv):
         self._check_ready()
         k = self.released
         self._in_before = self._in_target(k)
-        lo, hi = self.release_velocity_low, self.release_velocity_high
-        velocity = lo + (action + 1) / 2 * (hi - lo)
-        qa, da = self._qadr[k], self._dadr[k]
-        yaw = self._yaws[k]
-        self.data.qpos[qa : qa + 7] = (
-            *self._release_point(k),
-            np.cos(yaw / 2),
-            0.0,
-            0.0,
-            np.sin(yaw / 2),
-        )
-        self.data.qvel[da : da + 6] = (*velocity, 0.0, 0.0, 0.0, 0.0)
+        state = self.task.release(self.get_state(), k, float(self.release_yaws[k]), action)
+        mujoco.mj_setState(self.model, self.data, state, STATE_SPEC)
         self.released = k + 1
 
     def _release_point(self, k: int) -> np.ndarray:
         """``float[3]`` release position of object ``k``: raised above released objects under it."""
-        point = self.release_position.copy()
-        pos = self._positions()
-        for j in np.argsort(pos[:k, 2]):  # bottom to top, so a pile is climbed in order
-            if np.linalg.norm(pos[j, :2] - point[:2]) < self._radius[j] + self._radius[k]:
-                point[2] = max(point[2], pos[j, 2] + self._radius[j] + self._radius[k] + 0.05)
-        return point
+        return self.task.release_point(self.get_state(), k)
 
     def _observe(self) -> np.ndarray:
         k, n = self.released, len(self.objects)
@@ -281,12 +276,13 @@ class TossEnv(MjDynamicsEnv):
 
     def _evaluate(self, action: np.ndarray) -> tuple[dict[str, float], bool, bool, dict[str, Any]]:
         k = self.released
-        dist = float(np.linalg.norm(self._positions()[k - 1, :2] - self.target))
-        n_in = self._in_target(k)
+        state = self.get_state()
         terms = {
-            "reward_distance": -self.distance_weight * dist,
-            "reward_in_target": self.in_target_weight * float(n_in - self._in_before),
+            key: float(v)
+            for key, v in self.task.reward_terms(state, self.target, k - 1, self._in_before).items()
         }
+        dist = float(np.linalg.norm(self.task.positions(state)[k - 1, :2] - self.target))
+        n_in = int(self.task.in_target(state, self.target, k))
         speed = self.data.qvel[self._dadr[:k, None] + np.arange(3)]
         info = {
             "num_in_target": n_in,
@@ -296,32 +292,17 @@ class TossEnv(MjDynamicsEnv):
         return terms, k >= len(self.objects), False, info
 
     def _camera(self) -> mujoco.MjvCamera:
-        cam = mujoco.MjvCamera()
-        cam.lookat[:] = (-0.3, 0.0, 0.5)
-        cam.distance, cam.azimuth, cam.elevation = 11.0, -150.0, -30.0
-        return cam
+        return free_camera((-0.3, 0.0, 0.5), 11.0, -150.0, -30.0)
 
     def _decorate(self, scene: mujoco.MjvScene) -> None:
         add_disc(scene, (*self.target, 0.002), self.target_radius, (0.1, 0.8, 0.2, 0.35))
 
 
-class TossVectorEnv(BatchedVectorEnv):
-    """``num_envs`` :class:`TossEnv` stepped by one batched dynamics call.
+class TossVectorEnv(SingleEnvVectorEnv):
+    """``num_envs`` :class:`TossEnv` stepped by one batched dynamics call; arguments as
+    :class:`~fignet_gym.envs.vector.SingleEnvVectorEnv`.
 
-    The ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` entry point.
-
-    Args:
-        num_envs: number of sub-environments.
-        max_episode_steps: per-episode step limit (``None``: episodes end after the last toss).
-        autoreset_mode: Gymnasium ``AutoresetMode`` (default ``NEXT_STEP``).
-        kwargs: :class:`TossEnv` arguments, shared by every sub-environment.
+    ``max_episode_steps=None``: episodes end after the last toss.
     """
 
-    def __init__(
-        self,
-        num_envs: int = 1,
-        max_episode_steps: int | None = None,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(TossEnv(**kwargs), num_envs, max_episode_steps, autoreset_mode)
+    env_class = TossEnv

@@ -16,7 +16,7 @@ after an episode ended resets that sub-environment, returning its first observat
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
@@ -217,3 +217,26 @@ class BatchedVectorEnv(VectorEnv):
             f = getattr(env, name)
             out.append(f(*args, **kwargs) if callable(f) else f)
         return tuple(out)
+
+
+class SingleEnvVectorEnv(BatchedVectorEnv):
+    """A :class:`BatchedVectorEnv` of ``env_class(**kwargs)``: subclasses set ``env_class`` (the
+    ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` entry points).
+
+    Args:
+        num_envs: number of sub-environments.
+        max_episode_steps: per-episode step limit (``gym.make_vec`` passes the registered one).
+        autoreset_mode: Gymnasium ``AutoresetMode`` (default ``NEXT_STEP``).
+        kwargs: ``env_class`` arguments, shared by every sub-environment.
+    """
+
+    env_class: ClassVar[type[MjDynamicsEnv]]
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        max_episode_steps: int | None = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(self.env_class(**kwargs), num_envs, max_episode_steps, autoreset_mode)

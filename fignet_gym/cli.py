@@ -1,4 +1,4 @@
-"""``fignet-gym`` command line: demo, bench, train, evaluate, floor, ship, and the data commands."""
+"""``fignet-gym`` command line: demo, plan, ppo, ppo-table, bench, train, evaluate, floor, ship, data."""
 
 from __future__ import annotations
 
@@ -111,25 +111,58 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _plan(args: argparse.Namespace) -> int:
+    from fignet_gym.tools.plan import PlanError, run
+
+    try:
+        run(args)
+    except PlanError as err:  # a user's error: one line, no traceback
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
 def _demo(args: argparse.Namespace) -> int:
     from fignet_gym.tools.demo import run_demo
 
-    run_demo(args.out, quick=args.quick)
+    run_demo(args.out, quick=args.quick, episodes=args.episodes, rollouts=args.rollouts)
     return 0
+
+
+def _ppo(args: argparse.Namespace) -> int:
+    from fignet_gym.tools.ppo import run_ppo_command
+
+    return run_ppo_command(args)
+
+
+def _ppo_table(args: argparse.Namespace) -> int:
+    from fignet_gym.tools.ppo import ppo_table_command
+
+    return ppo_table_command(args)
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The full ``fignet-gym`` argument parser."""
     from fignet_gym.data.cli import register as register_data
     from fignet_gym.tools.bench import add_arguments as bench_args
+    from fignet_gym.tools.plan import add_arguments as plan_args
 
     p = argparse.ArgumentParser(prog="fignet-gym", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
 
-    d = sub.add_parser("demo", help="learned vs MuJoCo on the shipped pretrained simulators")
+    d = sub.add_parser("demo", help="MPC planning on the shipped learned simulator vs on MuJoCo, "
+                       "acting in MuJoCo (table, video, plot)")
     d.add_argument("--out", default="outputs/demo", help="folder for videos, plots and JSON")
-    d.add_argument("--quick", action="store_true", help="fewer rollouts (for tests)")
+    d.add_argument("--episodes", type=int, default=3, help="seeded Push-v1 episodes per model")
+    d.add_argument("--rollouts", action="store_true",
+                   help="also compare open-loop rollouts of the shipped simulators with MuJoCo")
+    d.add_argument("--quick", action="store_true", help="a tiny budget (for tests)")
     d.set_defaults(func=_demo)
+
+    pl = sub.add_parser("plan", help="MPC (CEM, MPPI) or a baseline on seeded episodes: "
+                        "success table, summary.json, side-by-side videos")
+    plan_args(pl)
+    pl.set_defaults(func=_plan)
 
     b = sub.add_parser("bench", help="learned step vs MuJoCo timings")
     bench_args(b)
@@ -190,6 +223,46 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--dest", help="folder (default: the package's pretrained/)")
     s.add_argument("--notes", default="", help="extra Markdown for the card")
     s.set_defaults(func=_ship)
+
+    o = sub.add_parser("ppo", help="train PPO on either dynamics (resumable), evaluate on both")
+    o.add_argument("--env", default="fignet_gym/Push-v1", help="environment id")
+    o.add_argument("--dynamics", choices=["mujoco", "fignet"], required=True,
+                   help="training dynamics (evaluation always runs on both)")
+    o.add_argument("--steps", type=int, required=True, help="environment steps in total")
+    o.add_argument("--out", required=True, help="run folder (checkpoints, TensorBoard, CSV, policy)")
+    o.add_argument("--resume", action="store_true", help="continue OUT from its last checkpoint")
+    o.add_argument("--force", action="store_true", help="delete an existing OUT first")
+    o.add_argument("--seed", type=int, default=0, help="PPO and training-env seed")
+    o.add_argument("--simulator", help="learned simulator: pretrained name or checkpoint (default: "
+                   "the pretrained one of the env's scene)")
+    o.add_argument("--num-envs", type=int, default=32, help="sub-environments stepped as one batch")
+    o.add_argument("--n-steps", type=int, default=64, help="steps per sub-environment per update")
+    o.add_argument("--batch-size", type=int, default=256, help="PPO minibatch")
+    o.add_argument("--n-epochs", type=int, default=10, help="passes over each rollout")
+    o.add_argument("--lr", type=float, default=3e-4, help="Adam learning rate")
+    o.add_argument("--gamma", type=float, default=0.99, help="discount")
+    o.add_argument("--ent-coef", type=float, default=0.0, help="entropy bonus")
+    o.add_argument("--net-arch", default="256,256", help="hidden sizes of policy and value MLPs")
+    o.add_argument("--log-std-init", type=float, default=-1.0,
+                   help="initial log std of the Gaussian policy (exploration noise)")
+    o.add_argument("--no-normalize", action="store_true",
+                   help="no VecNormalize of observations and rewards")
+    o.add_argument("--eval-every", type=int, default=25_000,
+                   help="evaluate on both dynamics every N steps (0: never)")
+    o.add_argument("--eval-episodes", type=int, default=32, help="episodes per periodic evaluation")
+    o.add_argument("--final-episodes", type=int, default=50,
+                   help="episodes per dynamics of the final evaluation")
+    o.add_argument("--checkpoint-every", type=int, default=20_000, help="resumable checkpoint every N steps")
+    o.add_argument("--compare", nargs="*", default=[],
+                   help="finished run folders to print in the transfer table beside this one")
+    o.add_argument("--quiet", action="store_true", help="no progress bar")
+    o.set_defaults(func=_ppo)
+
+    o = sub.add_parser("ppo-table", help="transfer table of finished PPO runs (trained on x evaluated on)")
+    o.add_argument("runs", nargs="+", help="run folders of `fignet-gym ppo`")
+    o.add_argument("--out", help="also write the Markdown table to this file")
+    o.add_argument("--plot", help="also plot the runs' periodic evaluations to this image")
+    o.set_defaults(func=_ppo_table)
 
     r = sub.add_parser("sim2real", help="nominal and fitted MuJoCo vs FIGNet at several training-set "
                        "sizes on real trajectories (split, fit, train, table, plot; resumable)")

@@ -13,12 +13,31 @@ import sys
 from types import ModuleType
 from typing import Any
 
-#: Registered ids: (entry point, vector entry point, episode step limit or None).
-ENV_SPECS: dict[str, tuple[str, str, int | None]] = {
-    "fignet_gym/Push-v0": ("fignet_gym.envs.push:PushEnv", "fignet_gym.envs.push:PushVectorEnv", 50),
-    "fignet_gym/Toss-v0": ("fignet_gym.envs.toss:TossEnv", "fignet_gym.envs.toss:TossVectorEnv", None),
-    "fignet_gym/CubeToss-v0": ("fignet_gym.envs.cube_toss:CubeTossEnv",
-                               "fignet_gym.envs.cube_toss:CubeTossVectorEnv", None),
+#: Push-v1's arguments (why: the Version History of ``PushEnv``'s docstring).
+PUSH_V1_KWARGS: dict[str, Any] = {
+    "tip_start": "behind",
+    "goal_distance_min": 0.02,
+    "goal_distance": 0.05,
+    "goal_yaw": 0.3,
+    "success_position": 0.01,
+    "success_yaw": 0.2,
+    "success_weight": 1.0,
+}
+#: Registered ids: (entry point, vector entry point, episode step limit or None, arguments).
+ENV_SPECS: dict[str, tuple[str, str, int | None, dict[str, Any]]] = {
+    "fignet_gym/Push-v0": (
+        "fignet_gym.envs.push:PushEnv", "fignet_gym.envs.push:PushVectorEnv", 50, {}
+    ),
+    "fignet_gym/Push-v1": (
+        "fignet_gym.envs.push:PushEnv", "fignet_gym.envs.push:PushVectorEnv", 75, PUSH_V1_KWARGS
+    ),
+    "fignet_gym/Toss-v0": (
+        "fignet_gym.envs.toss:TossEnv", "fignet_gym.envs.toss:TossVectorEnv", None, {}
+    ),
+    "fignet_gym/CubeToss-v0": (
+        "fignet_gym.envs.cube_toss:CubeTossEnv", "fignet_gym.envs.cube_toss:CubeTossVectorEnv",
+        None, {},
+    ),
 }
 #: Registered ids and their episode limits (Toss ends by itself once every object is released).
 ENV_IDS: dict[str, int | None] = {k: v[2] for k, v in ENV_SPECS.items()}
@@ -28,10 +47,10 @@ def register_envs() -> None:
     """Register every id of :data:`ENV_SPECS` with Gymnasium (idempotent)."""
     import gymnasium as gym
 
-    for env_id, (entry, vector_entry, limit) in ENV_SPECS.items():
+    for env_id, (entry, vector_entry, limit, kwargs) in ENV_SPECS.items():
         if env_id not in gym.registry:
             gym.register(id=env_id, entry_point=entry, vector_entry_point=vector_entry,
-                         max_episode_steps=limit)
+                         max_episode_steps=limit, kwargs=dict(kwargs))
 
 
 class _RegisterAfterImport(importlib.abc.MetaPathFinder, importlib.abc.Loader):

@@ -14,8 +14,8 @@ import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.envs import BatchedVectorEnv, SB3VecEnvAdapter, make_sb3_vec_env
 from fignet_gym.simulator.model import LearnedSimulator
 
-ENV_IDS = ["fignet_gym/Push-v0", "fignet_gym/Toss-v0"]
-FAST = {"fignet_gym/Push-v0": {}, "fignet_gym/Toss-v0": {"settle_steps": 3}}
+ENV_IDS = ["fignet_gym/Push-v0", "fignet_gym/Push-v1", "fignet_gym/Toss-v0"]
+FAST = {"fignet_gym/Push-v0": {}, "fignet_gym/Push-v1": {}, "fignet_gym/Toss-v0": {"settle_steps": 3}}
 
 
 

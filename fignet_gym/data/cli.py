@@ -33,26 +33,26 @@ def int_at_least(low: int) -> Callable[[str], int]:
     return parse
 
 
-def positive_float(text: str) -> float:
-    """argparse ``type``: a finite number ``> 0``."""
+def _finite_float(text: str, strict: bool) -> float:
+    """``text`` as a finite number ``> 0`` (``strict``) or ``>= 0``; ``ArgumentTypeError`` else."""
+    bound = "> 0" if strict else ">= 0"
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+        raise argparse.ArgumentTypeError(f"expected a number {bound}, got {text!r}") from None
+    if not (math.isfinite(value) and (value > 0 if strict else value >= 0)):
+        raise argparse.ArgumentTypeError(f"must be a finite number {bound}, got {text}")
     return value
+
+
+def positive_float(text: str) -> float:
+    """argparse ``type``: a finite number ``> 0``."""
+    return _finite_float(text, strict=True)
 
 
 def nonnegative_float(text: str) -> float:
     """argparse ``type``: a finite number ``>= 0``."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
-    return value
+    return _finite_float(text, strict=False)
 
 _KNOWN_ERRORS: tuple[type[BaseException], ...] = (TrajectoryFormatError, FileNotFoundError,
                                                   FileExistsError, ValueError, IndexError)

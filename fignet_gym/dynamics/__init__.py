@@ -7,20 +7,25 @@ Layers: :mod:`.base` (protocol, shared helpers) <- :mod:`.mujoco`, :mod:`.learne
 
 from fignet_gym.dynamics.base import (
     CONTROL_SPEC,
+    PHYSICS_SPEC,
     STATE_SPEC,
     DivergenceError,
     Dynamics,
     DynamicsBase,
     check_rollout_inputs,
+    join_state,
     rollout_loop,
     set_mocap,
+    split_state,
+    state_offsets,
 )
 from fignet_gym.dynamics.factory import DYNAMICS_FACTORIES, make_dynamics
 from fignet_gym.dynamics.learned import FIGNetDynamics
 from fignet_gym.dynamics.mujoco import MujocoDynamics
 
 __all__ = [
-    "CONTROL_SPEC", "DYNAMICS_FACTORIES", "STATE_SPEC", "DivergenceError", "Dynamics", "DynamicsBase",
+    "CONTROL_SPEC", "DYNAMICS_FACTORIES", "PHYSICS_SPEC", "STATE_SPEC", "DivergenceError",
+    "Dynamics", "DynamicsBase",
     "FIGNetDynamics", "MujocoDynamics", "check_rollout_inputs", "make_dynamics", "rollout_loop",
-    "set_mocap",
+    "join_state", "set_mocap", "split_state", "state_offsets",
 ]

@@ -8,8 +8,9 @@ A :class:`Dynamics` advances ``mujoco.MjData`` exactly where ``mujoco.mj_step`` 
 * ``step_many(model, datas, nstep)``: ``step`` on many ``MjData`` of one model at once (the learned
   dynamics runs them as one batched graph).
 * ``rollout(model, initial_state, control, nstep, frame_skip=...)``: shaped like
-  ``mujoco.rollout.rollout``: full-physics states ``float64[B, nstate]`` in, mocap trajectories as
-  control, states ``float64[B, nstep, nstate]`` out.
+  ``mujoco.rollout.rollout``: whole states ``float64[B, nstate]`` in (:data:`STATE_SPEC`: full
+  physics *and* mocap poses, so that a rollout starts every body, the pusher included, where the
+  state says), mocap trajectories as control, states ``float64[B, nstep, nstate]`` out.
 
 Kinematic bodies are mocap bodies: before a step, set ``data.mocap_pos``/``mocap_quat`` to where
 they should be at the *end* of the step; both implementations move them there linearly from their
@@ -31,8 +32,18 @@ from typing import Protocol, runtime_checkable
 import mujoco
 import numpy as np
 
-#: State layout of :meth:`Dynamics.rollout` (``mujoco.rollout``'s): time, qpos, qvel, act, ...
-STATE_SPEC = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
+#: State layout of :meth:`Dynamics.rollout`, in and out: ``mjSTATE_FULLPHYSICS`` (time, qpos,
+#: qvel, act, plugin) plus every mocap position and quaternion. ``mujoco.mj_getState(model, data,
+#: s, STATE_SPEC)`` reads it from an ``MjData``. Mocap poses are part of the state because with
+#: ``frame_skip > 1`` a mocap body moves linearly from where it is to its next target: a state
+#: without them would start the pusher wherever a scratch ``MjData`` last left it.
+STATE_SPEC = int(
+    mujoco.mjtState.mjSTATE_FULLPHYSICS
+    | mujoco.mjtState.mjSTATE_MOCAP_POS
+    | mujoco.mjtState.mjSTATE_MOCAP_QUAT
+)
+#: ``mujoco.rollout``'s own state layout (full physics, no mocap poses).
+PHYSICS_SPEC = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
 #: Control layout of :meth:`Dynamics.rollout`: every mocap position, then every mocap quaternion.
 CONTROL_SPEC = int(mujoco.mjtState.mjSTATE_MOCAP_POS | mujoco.mjtState.mjSTATE_MOCAP_QUAT)
 
@@ -112,7 +123,8 @@ def check_rollout_inputs(
         state = state[None]
     if state.ndim != 2 or state.shape[1] != nstate:
         raise ValueError(
-            f"initial_state must be float[B, {nstate}] (mjSTATE_FULLPHYSICS), "
+            f"initial_state must be float[B, {nstate}] (STATE_SPEC: mjSTATE_FULLPHYSICS | "
+            f"mjSTATE_MOCAP_POS | mjSTATE_MOCAP_QUAT, from mujoco.mj_getState), "
             f"got shape {np.shape(initial_state)}"
         )
     if control is None:
@@ -153,11 +165,44 @@ def set_mocap(model: mujoco.MjModel, data: mujoco.MjData, control_row: np.ndarra
     data.mocap_quat[:] = control_row[3 * nm :].reshape(nm, 4)
 
 
+def state_offsets(model: mujoco.MjModel) -> tuple[int, int, int]:
+    """Sizes in :data:`STATE_SPEC`: physics before the mocap poses, mocap poses, plugin state."""
+    pre = mujoco.mj_stateSize(
+        model,
+        int(
+            mujoco.mjtState.mjSTATE_TIME
+            | mujoco.mjtState.mjSTATE_QPOS
+            | mujoco.mjtState.mjSTATE_QVEL
+            | mujoco.mjtState.mjSTATE_ACT
+        ),
+    )
+    return pre, 7 * model.nmocap, mujoco.mj_stateSize(model, int(mujoco.mjtState.mjSTATE_PLUGIN))
+
+
+def split_state(model: mujoco.MjModel, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:data:`STATE_SPEC` states ``float64[..., nstate]`` -> ``mjSTATE_FULLPHYSICS`` states
+    ``float64[..., nphys]`` and mocap poses ``float64[..., nmocap * 7]`` (positions, then
+    quaternions: the control layout)."""
+    pre, nm7, _ = state_offsets(model)
+    state = np.asarray(state, dtype=np.float64)
+    phys = np.concatenate((state[..., :pre], state[..., pre + nm7 :]), axis=-1)
+    return phys, state[..., pre : pre + nm7].copy()
+
+
+def join_state(model: mujoco.MjModel, phys: np.ndarray, mocap: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`split_state`: ``float64[..., nphys]`` and ``float64[..., nmocap * 7]``
+    -> ``float64[..., nstate]``."""
+    pre, _, _ = state_offsets(model)
+    mocap = np.broadcast_to(mocap, (*phys.shape[:-1], mocap.shape[-1]))
+    return np.concatenate((phys[..., :pre], mocap, phys[..., pre:]), axis=-1)
+
+
 class DynamicsBase:
     """Defaults for a :class:`Dynamics`: subclasses implement :meth:`step` only.
 
-    ``step_many`` loops over ``step``, ``rollout`` loops ``step`` on a scratch ``MjData`` (mocap
-    bodies start at ``control[:, 0]``), ``validate`` accepts everything.
+    ``step_many`` loops over ``step``, ``rollout`` checks its inputs and calls ``_rollout`` (the
+    batched override point), which loops ``step`` on a scratch ``MjData`` loaded with each initial
+    state (mocap poses included), ``validate`` accepts everything.
     """
 
     def step(self, model: mujoco.MjModel, data: mujoco.MjData, nstep: int = 1) -> None:
@@ -189,8 +234,18 @@ class DynamicsBase:
         *,
         frame_skip: int = 1,
     ) -> np.ndarray:
-        """A loop of :meth:`step` per rollout (see :meth:`Dynamics.rollout`); diverged rows: NaN."""
+        """:meth:`Dynamics.rollout`: the inputs checked and broadcast by
+        :func:`check_rollout_inputs`, then :meth:`_rollout` (what a subclass overrides)."""
         state, control, nstep = check_rollout_inputs(model, initial_state, control, nstep)
+        return self._rollout(model, state, control, nstep, frame_skip)
+
+    def _rollout(
+        self, model: mujoco.MjModel, state: np.ndarray, control: np.ndarray, nstep: int,
+        frame_skip: int,
+    ) -> np.ndarray:
+        """A loop of :meth:`step` per rollout on checked inputs: ``float64[B, nstate]`` states,
+        ``float64[B, nstep, nmocap * 7]`` controls -> ``float64[B, nstep, nstate]``; diverged
+        rows: NaN."""
         out = np.full((state.shape[0], nstep, state.shape[1]), np.nan)
         data = mujoco.MjData(model)
         for b in range(state.shape[0]):
@@ -212,16 +267,15 @@ def rollout_loop(
 ) -> np.ndarray:
     """One rollout as a loop of single :meth:`Dynamics.step` calls (the reference for ``rollout``).
 
-    ``data`` is reset, loaded with ``initial_state float64[nstate]``, its mocap bodies placed at
-    ``control[0]`` (``float64[T, nmocap * 7]``) and forwarded; then each control row is applied
-    and ``frame_skip`` timesteps taken. Returns the states ``float64[T, nstate]`` (rows after a
-    :class:`DivergenceError` are NaN).
+    ``data`` is reset, loaded with ``initial_state float64[nstate]`` (:data:`STATE_SPEC`: mocap
+    bodies where the state has them) and forwarded; then each control row (``float64[T, nmocap *
+    7]``) is applied and ``frame_skip`` timesteps taken. Returns the states ``float64[T, nstate]``
+    (rows after a :class:`DivergenceError` are NaN).
     """
     T = control.shape[0]
     out = np.full((T, mujoco.mj_stateSize(model, STATE_SPEC)), np.nan) if out is None else out
     mujoco.mj_resetData(model, data)
     mujoco.mj_setState(model, data, np.asarray(initial_state, dtype=np.float64), STATE_SPEC)
-    set_mocap(model, data, control[0])
     mujoco.mj_forward(model, data)
     for t in range(T):
         set_mocap(model, data, control[t])

@@ -18,7 +18,6 @@ from fignet_gym.dynamics.base import (
     STATE_SPEC,
     DivergenceError,
     DynamicsBase,
-    check_rollout_inputs,
     set_mocap,
 )
 from fignet_gym.pretrained import load_checkpoint
@@ -56,6 +55,32 @@ class _SceneInfo:
     kin_mocap: np.ndarray  # int[K] their mocap ids
     kin_body: np.ndarray  # int[K] their body ids
     floor_z: float  # lowest static node (m), -inf without static objects
+
+
+#: Nodes per learned step at most: larger batches are stepped in chunks of whole scenes. Per-scene
+#: cost is lowest around 8k to 17k nodes (docs/experiments.md, issue 17); beyond, every latent
+#: outgrows the caches and each new tensor is fresh memory to fault in.
+CHUNK_NODES = 16384
+
+
+def batched_step(sim: LearnedSimulator, scene: Scene, count: int, hist: Tensor, target: Tensor
+                 ) -> Tensor:
+    """One learned step of ``count`` copies of ``scene``, in chunks of at most
+    :data:`CHUNK_NODES` nodes (the scenes are disjoint, and a scene's result does not depend on
+    its batch, so chunking changes no bit).
+
+    ``hist float[H, count*O, 7]``, ``target float[count*O, 7]`` -> ``float[count*O, 7]``.
+    """
+    chunks = -(-count * scene.num_nodes // CHUNK_NODES)
+    if chunks <= 1:
+        return sim.step(scene.repeat(count), hist, target)
+    n_obj, out, start = scene.num_objects, [], 0
+    for i in range(chunks):
+        c = count // chunks + (i < count % chunks)  # sizes differ by at most one
+        rows = slice(start * n_obj, (start + c) * n_obj)
+        out.append(sim.step(scene.repeat(c), hist[:, rows], target[rows]))
+        start += c
+    return torch.cat(out)
 
 
 def _integrate_back(poses: Tensor, lin: Tensor, ang_body: Tensor, k: int, dt: float) -> Tensor:
@@ -250,30 +275,34 @@ class FIGNetDynamics(DynamicsBase):
         and the reasons of the scenes that diverged, which are frozen at their last good poses from
         on (so that nothing non-finite ever enters the graph). Scenes in ``dead`` stay frozen.
         """
-        scene = info.scene.repeat(B)
         n_obj = info.scene.num_objects
-        dyn = scene.dynamic_mask
+        dyn = info.scene.dynamic_mask.repeat(B)
+        static_poses = info.scene.static_poses.repeat(B, 1)
         bad: dict[int, str] = {}
         finite = (
             (torch.isfinite(hist).all(0).all(-1) & torch.isfinite(target).all(-1))
             .view(B, n_obj)
             .all(1)
         )
-        for b in torch.nonzero(~finite).flatten().tolist():
-            bad[b] = f"non-finite state (qpos, qvel or mocap) at t={t0[b]:.3f}s"
+        # Index lists come to the host only when something is wrong: a healthy step syncs a few
+        # scalars for control flow and moves no tensor (tests/test_batching.py).
+        if not bool(finite.all()):
+            for b in torch.nonzero(~finite).flatten().tolist():
+                bad[b] = f"non-finite state (qpos, qvel or mocap) at t={t0[b]:.3f}s"
         frozen = torch.zeros(B, dtype=torch.bool, device=hist.device)
-        frozen[list(bad) + list(dead)] = True
+        if bad or dead:
+            frozen[torch.as_tensor(list(bad) + list(dead), device=hist.device)] = True
         if bool(frozen.any()):  # stand-in poses for frozen scenes: their reference configuration
             per_obj = frozen.repeat_interleave(n_obj)
             hist = torch.where(
-                per_obj[None, :, None] & ~torch.isfinite(hist), scene.static_poses[None], hist
+                per_obj[None, :, None] & ~torch.isfinite(hist), static_poses[None], hist
             )
             target = torch.where(
-                per_obj[:, None] & ~torch.isfinite(target), scene.static_poses, target
+                per_obj[:, None] & ~torch.isfinite(target), static_poses, target
             )
         for k in range(nlearn):
             try:
-                nxt = self.simulator.step(scene, hist, target)
+                nxt = batched_step(self.simulator, info.scene, B, hist, target)
             except (ShapeMatchError, torch.linalg.LinAlgError) as err:
                 reason = f"learned step failed at t={t0[0] + (k + 1) * self.dt:.3f}s: {err}"
                 return hist, {b: bad.get(b, reason) for b in range(B) if b not in dead}
@@ -384,30 +413,17 @@ class FIGNetDynamics(DynamicsBase):
                 "; ".join(f"[{b}] {bad[b]}" for b in order), order, [bad[b] for b in order]
             )
 
-    def rollout(
-        self,
-        model: mujoco.MjModel,
-        initial_state: np.ndarray,
-        control: np.ndarray | None = None,
-        nstep: int | None = None,
-        *,
-        frame_skip: int = 1,
+    def _rollout(
+        self, model: mujoco.MjModel, state: np.ndarray, control: np.ndarray, nstep: int,
+        frame_skip: int,
     ) -> np.ndarray:
         """All ``B`` rollouts in one batched graph per learned step.
 
-        Args:
-            initial_state: ``float64[B or 1, nstate]`` (``mjSTATE_FULLPHYSICS``); free-joint
-                velocities seed the history (constant-velocity back-extrapolation).
-            control: ``float64[B or 1, nstep, nmocap * 7]`` mocap targets (positions, then
-                quaternions); mocap bodies start at rest at ``control[:, 0]``.
-            nstep: number of recorded states (default: ``control.shape[1]``).
-            frame_skip: MuJoCo timesteps per recorded state; ``frame_skip * timestep`` must be a
-                whole number of learned steps.
-
-        Returns:
-            ``float64[B, nstep, nstate]``; a rollout that diverges is NaN from that step on.
+        Shapes as :meth:`DynamicsBase._rollout`. Free-joint velocities seed the history
+        (constant-velocity back-extrapolation), mocap bodies start at rest at the state's mocap
+        poses (as :meth:`step` reseeds them); ``frame_skip * timestep`` must be a whole number of
+        learned steps. A rollout that diverges is NaN from that step on.
         """
-        state, control, nstep = check_rollout_inputs(model, initial_state, control, nstep)
         nlearn = self.learned_steps(model, frame_skip)
         info = self._scene_info(model)
         B, nstate = state.shape
@@ -415,8 +431,7 @@ class FIGNetDynamics(DynamicsBase):
         hists, times = [], []
         for b in range(B):
             mujoco.mj_setState(model, scratch, state[b], STATE_SPEC)
-            set_mocap(model, scratch, control[b, 0])
-            scratch.xquat[:] = 0.0  # mocap bodies start at control[:, 0]
+            scratch.xquat[:] = 0.0  # mocap bodies start at the state's mocap_pos / mocap_quat
             hists.append(self._seed(info, scratch, None, None))
             times.append(float(scratch.time))
         hist = torch.cat(hists, dim=1)
@@ -427,21 +442,46 @@ class FIGNetDynamics(DynamicsBase):
         nm = model.nmocap
         mocap_pos = control[..., : 3 * nm].reshape(B, nstep, nm, 3)[:, :, info.kin_mocap]
         mocap_quat = control[..., 3 * nm :].reshape(B, nstep, nm, 4)[:, :, info.kin_mocap]
+        # The loop stays on the simulator's device: mocap targets go there once, poses come back
+        # once after the last step (no numpy round trip per step; see tests/test_batching.py).
+        targets = self._targets_all(info, mocap_pos, mocap_quat, hist.device)  # [T, B*K, 7]
+        kin_rows = torch.as_tensor(
+            (np.arange(B)[:, None] * info.scene.num_objects + info.kin[None]).ravel(),
+            device=hist.device)
+        dead_from: dict[int, int] = {}
+        last, before = [], []
         for t in range(nstep):
-            target = self._targets(info, hist[-1], mocap_pos[:, t], mocap_quat[:, t])
+            target = hist[-1].clone()
+            if len(info.kin):
+                target[kin_rows] = targets[t]
             times_t = [x + t * nlearn * self.dt for x in times]
             hist, bad = self._advance(info, hist, target, B, nlearn, times_t, sorted(dead))
+            for b in bad:
+                dead_from.setdefault(b, t)
             dead |= set(bad)
-            pose, vel = self._pose_velocity(info, hist, B)
-            for b in range(B):
-                if b in dead:
-                    continue
-                mujoco.mj_setState(model, scratch, state[b], STATE_SPEC)
-                scratch.qpos[qa] = pose[b]
-                scratch.qvel[da] = vel[b]
+            last.append(hist[-1])
+            before.append(hist[-2])
+        pose, vel = self._pose_velocity(
+            info, torch.stack((torch.cat(before), torch.cat(last))), nstep * B)
+        pose, vel = pose.reshape(nstep, B, -1, 7), vel.reshape(nstep, B, -1, 6)
+        for b in range(B):
+            mujoco.mj_setState(model, scratch, state[b], STATE_SPEC)
+            for t in range(dead_from.get(b, nstep)):
+                scratch.qpos[qa] = pose[t, b]
+                scratch.qvel[da] = vel[t, b]
                 scratch.time = state[b, 0] + (t + 1) * frame_skip * float(model.opt.timestep)
+                set_mocap(model, scratch, control[b, t])
                 mujoco.mj_getState(model, scratch, out[b, t], STATE_SPEC)
         return out
+
+    @staticmethod
+    def _targets_all(info: _SceneInfo, pos: np.ndarray, quat: np.ndarray, device: torch.device
+                     ) -> Tensor:
+        """Kinematic targets of every step on ``device``: ``pos float[B, T, K, 3]``,
+        ``quat float[B, T, K, 4]`` -> ``float[T, B*K, 7]`` (unit quaternions)."""
+        tgt = torch.as_tensor(np.concatenate((pos, quat), -1), dtype=torch.float32, device=device)
+        tgt = tgt.transpose(0, 1).reshape(pos.shape[1], -1, 7)
+        return torch.cat((tgt[..., :3], quat_normalize(tgt[..., 3:])), -1)
 
     def forget(self, data: mujoco.MjData) -> None:
         """Drop the stored history of ``data`` (the next step reseeds it from ``qpos``/``qvel``)."""

@@ -9,10 +9,10 @@ import numpy as np
 
 from fignet_gym.dynamics.base import (
     CONTROL_SPEC,
-    STATE_SPEC,
     DivergenceError,
     DynamicsBase,
-    check_rollout_inputs,
+    join_state,
+    split_state,
 )
 
 _WARNINGS = (
@@ -66,29 +66,17 @@ class MujocoDynamics(DynamicsBase):
                 "(it reset the simulation)"
             )
 
-    def rollout(
-        self,
-        model: mujoco.MjModel,
-        initial_state: np.ndarray,
-        control: np.ndarray | None = None,
-        nstep: int | None = None,
-        *,
-        frame_skip: int = 1,
+    def _rollout(
+        self, model: mujoco.MjModel, state: np.ndarray, control: np.ndarray, nstep: int,
+        frame_skip: int,
     ) -> np.ndarray:
         """``mujoco.rollout`` on a persistent thread pool, one state per ``frame_skip`` timesteps.
 
-        Args:
-            initial_state: ``float64[B or 1, nstate]`` (``mjSTATE_FULLPHYSICS``).
-            control: ``float64[B or 1, nstep, nmocap * 7]`` mocap targets (positions, then
-                quaternions): row ``t`` is reached linearly over the ``frame_skip`` timesteps of
-                step ``t``, from row ``t - 1`` (from the initial state's mocap pose for ``t = 0``).
-            nstep: number of recorded states (default: ``control.shape[1]``).
-            frame_skip: MuJoCo timesteps per recorded state (1: exactly ``mujoco.rollout``).
-
-        Returns:
-            ``float64[B, nstep, nstate]`` the state after each ``frame_skip`` timesteps.
+        Shapes as :meth:`DynamicsBase._rollout`. Control row ``t`` is reached linearly over the
+        ``frame_skip`` timesteps of step ``t``, from row ``t - 1`` (from the initial state's mocap
+        pose for ``t = 0``), exactly as :meth:`step` moves them; ``frame_skip = 1`` is exactly
+        ``mujoco.rollout``. Each returned state's mocap poses are the control rows.
         """
-        state, control, nstep = check_rollout_inputs(model, initial_state, control, nstep)
         if frame_skip < 1:
             raise ValueError(f"frame_skip must be >= 1, got {frame_skip}")
         from mujoco import rollout as mj_rollout
@@ -98,20 +86,16 @@ class MujocoDynamics(DynamicsBase):
         if self._scratch is None or self._scratch[0] is not model:
             self._scratch = (model, [mujoco.MjData(model) for _ in range(max(self.nthread, 1))])
         datas = self._scratch[1]
+        phys, start = split_state(model, state)
         fine = control
         if frame_skip > 1 and model.nmocap:
-            start = np.empty((state.shape[0], control.shape[2]))
-            scratch = datas[0]
-            for b in range(state.shape[0]):
-                mujoco.mj_setState(model, scratch, state[b], STATE_SPEC)
-                start[b] = np.concatenate((scratch.mocap_pos.ravel(), scratch.mocap_quat.ravel()))
             fine = interpolate_mocap(start, control, frame_skip, model.nmocap)
         elif frame_skip > 1:
             fine = np.repeat(control, frame_skip, axis=1)
         out, _ = self._pool.rollout(
-            model, datas, state, fine, control_spec=CONTROL_SPEC, nstep=nstep * frame_skip
+            model, datas, phys, fine, control_spec=CONTROL_SPEC, nstep=nstep * frame_skip
         )
-        return np.ascontiguousarray(out[:, frame_skip - 1 :: frame_skip])
+        return join_state(model, out[:, frame_skip - 1 :: frame_skip], control)
 
     def close(self) -> None:
         """Stop the rollout thread pool."""

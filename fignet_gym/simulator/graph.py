@@ -50,6 +50,9 @@ class Graph:
         node_edges: node-node collision edges (MeshGraphNets baseline), else empty.
         node_pos: ``float[N, 3]`` current node positions: not a feature (the network sees only
             relative ones), the basis of the optional rigid projection of its output.
+        node_scene: ``int64[N]`` scene of each node in a batch (sorted), or ``None`` for one
+            scene: the network makes its per-scene choices from it, so that a scene's result does
+            not depend on the scenes batched with it.
     """
 
     node_features: Tensor
@@ -61,6 +64,7 @@ class Graph:
     face_edges: FaceEdgeSet
     node_edges: EdgeSet
     node_pos: Tensor
+    node_scene: Tensor | None = None
 
     @property
     def num_objects(self) -> int:
@@ -296,4 +300,5 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
         obj_mesh_features=om_f, mesh_obj_features=mo_f,
         mesh_edges=EdgeSet(s, r, mesh_f), face_edges=FaceEdgeSet(fs, fr, ff),
         node_edges=EdgeSet(ns, nr, nf), node_pos=cur,
+        node_scene=scene.object_scene.index_select(0, scene.node_object) if scene.num_scenes > 1 else None,
     )

@@ -13,6 +13,13 @@ ways, whichever needs fewer multiply-adds (:func:`edge_first_layer`):
 * project every node once through all ``k`` weight blocks as one matmul, then sum the ``k``
   projected rows of each edge with one ``embedding_bag`` (``N * k`` rows): better once there are
   more edges than nodes (mesh edges), never materialising the per-edge concatenation.
+
+The two ways round differently, so the choice is made per scene of a batch (``edges > nodes`` of
+that scene), never from batch totals: a scene's result must not depend on the scenes batched with
+it (a vector env reproduces single envs, and a contact at the collision radius turns one ulp into
+centimetres). For the same reason every matmul gets at least :data:`MIN_ROWS` rows: BLAS computes
+narrower products with another kernel, which rounds differently from the same rows inside a larger
+product.
 """
 
 from __future__ import annotations
@@ -24,6 +31,61 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from fignet_gym.simulator.graph import Graph
+
+#: Fewest rows a matmul is given (padded with zeros): BLAS uses another kernel for 1 to 3 rows,
+#: whose rounding differs from the same rows inside a larger product (measured with torch 2.13 on
+#: CPU), which would make a scene's result depend on its batch.
+MIN_ROWS = 4
+
+
+#: oneDNN's fused linear runs on products of at least this many rows (below, its per-call cost
+#: exceeds the saving), at most this many input columns and a multiple of 16 output columns:
+#: there it rounds exactly like MKL's (checked by tests/test_batching.py; it does not for 256
+#: inputs or 3 outputs), so a batch that crosses the threshold still reproduces its scenes alone.
+FUSED_MIN_ROWS, FUSED_MAX_IN = 4096, 192
+
+
+def _fused_ok(x: Tensor, w: Tensor) -> bool:
+    """Whether oneDNN's fused linear (+ReLU) kernel applies: large float32 CPU inference."""
+    return (_ONEDNN and x.shape[0] >= FUSED_MIN_ROWS and x.shape[-1] <= FUSED_MAX_IN
+            and w.shape[0] % 16 == 0
+            and x.device.type == "cpu" and x.dtype == w.dtype == torch.float32
+            and x.dim() == 2 and not torch.is_grad_enabled()
+            and not torch.is_autocast_enabled("cpu"))
+
+
+_ONEDNN = torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_linear_pointwise")
+
+
+def linear(x: Tensor, w: Tensor, b: Tensor | None = None, relu: bool = False) -> Tensor:
+    """``F.linear`` (then ReLU if ``relu``) whose rows round as they would inside any larger batch.
+
+    ``float[M, in] -> float[M, out]``; fewer than :data:`MIN_ROWS` rows are zero-padded. In float32
+    CPU inference on many rows it runs oneDNN's linear with the bias and ReLU fused into the matmul
+    (the kernel inductor uses): up to twice MKL's rate on these narrow layers, because the output is
+    written once instead of three times (bias broadcast, product, ReLU).
+    """
+    m = x.shape[0]
+    pad = 0 < m < MIN_ROWS
+    if pad:
+        x = F.pad(x, (0, 0, 0, MIN_ROWS - m))
+    if _fused_ok(x, w):
+        out = torch.ops.mkldnn._linear_pointwise(x.contiguous(), w.contiguous(), b,
+                                                 "relu" if relu else "none", [], "")
+    else:
+        out = F.linear(x, w, b)
+        if relu:
+            out = out.relu_()
+    return out[:m] if pad else out
+
+
+def addmm(c: Tensor, a: Tensor, b: Tensor) -> Tensor:
+    """``c + a @ b`` (``float[M, n]``) with :func:`linear`'s row padding."""
+    m = a.shape[0]
+    if 0 < m < MIN_ROWS:
+        pad = MIN_ROWS - m
+        return torch.addmm(F.pad(c, (0, 0, 0, pad)), F.pad(a, (0, 0, 0, pad)), b)[:m]
+    return torch.addmm(c, a, b)
 
 
 class MLP(nn.Module):
@@ -46,7 +108,7 @@ class MLP(nn.Module):
         self.rest = nn.Sequential(*rest)
 
     def forward(self, x: Tensor) -> Tensor:
-        return self.forward_pre(F.linear(x, self.first.weight, self.first.bias))
+        return self.forward_pre(linear(x, self.first.weight, self.first.bias))
 
     def forward_pre(self, pre: Tensor) -> Tensor:
         """Finish the MLP from a first-layer pre-activation ``float[..., hidden]``.
@@ -58,13 +120,15 @@ class MLP(nn.Module):
         latents and their residual sums stay float32 and only matmul inputs are rounded.
         """
         x = pre
-        for layer in self.rest:
+        layers = list(self.rest)
+        for i, layer in enumerate(layers):
             if isinstance(layer, nn.Linear):
-                x = F.linear(x, layer.weight, layer.bias)
+                relu = i + 1 < len(layers) and isinstance(layers[i + 1], nn.ReLU)
+                x = linear(x, layer.weight, layer.bias, relu)
             elif isinstance(layer, nn.LayerNorm):
                 x = F.layer_norm(x.to(layer.weight.dtype), layer.normalized_shape, layer.weight,
                                  layer.bias, layer.eps)
-            else:
+            elif i == 0 or not isinstance(layers[i - 1], nn.Linear):  # else fused into the linear
                 x = x.relu_()
         return x
 
@@ -76,20 +140,69 @@ class EdgeIndex:
     Attributes:
         nodes: ``int64[M, k]`` node of each of the ``k`` node slots of every edge, in the order of
             the MLP input blocks after the edge latent.
-        table_rows: ``int64[M, k]`` rows ``k * node + slot`` of a ``[N * k, hidden]`` table of
-            node projections, or ``None`` when gathering latents is cheaper (``M <= N``).
+        table_rows: ``int64[Mt, k]`` rows ``k * position + slot`` of a ``[U * k, hidden]`` table of
+            node projections for the edges of scenes with more edges than nodes, or ``None`` when
+            no scene has (every edge gathers latents).
+        table_nodes: ``int64[U]`` nodes projected into the table (``None``: all nodes).
+        table_edges: ``int64[Mt]`` the edges of ``table_rows`` and ``gather_edges int64[Mg]`` the
+            others, when both kinds occur in one batch (``None`` otherwise).
     """
 
     nodes: Tensor
     table_rows: Tensor | None
+    table_nodes: Tensor | None = None
+    table_edges: Tensor | None = None
+    gather_edges: Tensor | None = None
 
     @staticmethod
-    def build(nodes: Tensor, num_nodes: int) -> EdgeIndex:
-        """``nodes int64[M, k]``; projecting all ``N`` nodes pays off only with more edges than nodes."""
-        k = nodes.shape[1]
-        if nodes.shape[0] <= num_nodes:
+    def build(nodes: Tensor, node_scene: Tensor | None = None, num_scenes: int = 1,
+              num_nodes: int | None = None) -> EdgeIndex:
+        """``nodes int64[M, k]``, ``node_scene int64[N]`` (sorted; ``None``: one scene of
+        ``num_nodes`` nodes). Projecting a scene's nodes pays off only with more edges than nodes."""
+        m, k = nodes.shape
+        slots = torch.arange(k, device=nodes.device)
+        if node_scene is None or num_scenes == 1:
+            n = num_nodes if node_scene is None else node_scene.shape[0]
+            if m <= n:
+                return EdgeIndex(nodes, None)
+            return EdgeIndex(nodes, nodes * k + slots)
+        edge_scene = node_scene.index_select(0, nodes[:, 0])
+        table = (torch.bincount(edge_scene, minlength=num_scenes)
+                 > torch.bincount(node_scene, minlength=num_scenes))
+        if not bool(table.any()):
             return EdgeIndex(nodes, None)
-        return EdgeIndex(nodes, nodes * k + torch.arange(k, device=nodes.device))
+        if bool(table.all()):
+            return EdgeIndex(nodes, nodes * k + slots)
+        edge_t = table.index_select(0, edge_scene)
+        table_edges, gather_edges = edge_t.nonzero().squeeze(1), (~edge_t).nonzero().squeeze(1)
+        table_nodes = table.index_select(0, node_scene).nonzero().squeeze(1)
+        position = torch.full_like(node_scene, -1).index_copy_(
+            0, table_nodes, torch.arange(table_nodes.shape[0], device=nodes.device))
+        rows = position[nodes.index_select(0, table_edges)] * k + slots
+        return EdgeIndex(nodes, rows, table_nodes, table_edges, gather_edges)
+
+
+def _gathered_first_layer(first: nn.Linear, e: Tensor, v: Tensor, nodes: Tensor) -> Tensor:
+    """First layer on the concatenation ``[e, v[nodes[:, 0]], ...]``: ``float[M, hidden]``."""
+    m, k = nodes.shape
+    gathered = v.index_select(0, nodes.reshape(-1)).view(m, k * v.shape[1])
+    return linear(torch.cat((e, gathered), dim=1), first.weight, first.bias)
+
+
+def _table_first_layer(first: nn.Linear, e: Tensor, v: Tensor, rows: Tensor) -> Tensor:
+    """First layer from node projections: ``v float[U, L]`` projected through each slot's weight
+    block, rows ``int64[M, k]`` of that table summed per edge, plus the edge block on ``e``."""
+    w, b = first.weight, first.bias
+    k, d = rows.shape[1], e.shape[1]
+    h, n, lat = w.shape[0], v.shape[0], v.shape[1]
+    # Weight blocks of the k node slots stacked as rows ([k * hidden, L]), so that one matmul
+    # projects every node through all of them; the bias rides on slot 0, which each edge
+    # gathers exactly once.
+    w_nodes = w[:, d:].reshape(h, k, lat).transpose(0, 1).reshape(k * h, lat)
+    b_nodes = torch.cat((b, b.new_zeros((k - 1) * h)))
+    table = linear(v, w_nodes, b_nodes).view(n * k, h)
+    gathered = F.embedding_bag(rows, table, mode="sum")
+    return addmm(gathered, e, w[:, :d].T)
 
 
 def edge_first_layer(first: nn.Linear, e: Tensor, v: Tensor, index: EdgeIndex) -> Tensor:
@@ -104,21 +217,16 @@ def edge_first_layer(first: nn.Linear, e: Tensor, v: Tensor, index: EdgeIndex) -
     Returns:
         ``float[M, hidden]`` pre-activations.
     """
-    m, k = index.nodes.shape
-    w, b = first.weight, first.bias
-    d = e.shape[1]
     if index.table_rows is None:
-        gathered = v.index_select(0, index.nodes.reshape(-1)).view(m, k * v.shape[1])
-        return F.linear(torch.cat((e, gathered), dim=1), w, b)
-    h, n, lat = w.shape[0], v.shape[0], v.shape[1]
-    # Weight blocks of the k node slots stacked as rows ([k * hidden, L]), so that one matmul
-    # projects every node through all of them; the bias rides on slot 0, which each edge
-    # gathers exactly once.
-    w_nodes = w[:, d:].reshape(h, k, lat).transpose(0, 1).reshape(k * h, lat)
-    b_nodes = torch.cat((b, b.new_zeros((k - 1) * h)))
-    table = F.linear(v, w_nodes, b_nodes).view(n * k, h)
-    gathered = F.embedding_bag(index.table_rows, table, mode="sum")
-    return torch.addmm(gathered, e, w[:, :d].T)
+        return _gathered_first_layer(first, e, v, index.nodes)
+    v_t = v if index.table_nodes is None else v.index_select(0, index.table_nodes)
+    if index.table_edges is None:
+        return _table_first_layer(first, e, v_t, index.table_rows)
+    g, t = index.gather_edges, index.table_edges
+    pre_g = _gathered_first_layer(first, e.index_select(0, g), v, index.nodes.index_select(0, g))
+    pre_t = _table_first_layer(first, e.index_select(0, t), v_t, index.table_rows)
+    out = pre_g.new_empty(e.shape[0], first.weight.shape[0])  # autocast may have made it bf16
+    return out.index_copy_(0, g, pre_g).index_copy_(0, t, pre_t.to(out.dtype))
 
 
 @dataclass(frozen=True)
@@ -148,13 +256,19 @@ class Topology:
         """The index tensors of ``g``."""
         n = g.node_features.shape[0]
         me, we, fe = g.mesh_edges, g.node_edges, g.face_edges
+        ns = g.node_scene
+        s = 1 if ns is None or n == 0 else int(ns[-1]) + 1
+
+        def index(nodes: Tensor) -> EdgeIndex:
+            return EdgeIndex.build(nodes, ns, s, n)
+
         return Topology(
             num_nodes=n, node_object=g.node_object,
-            mesh=EdgeIndex.build(torch.stack((me.senders, me.receivers), dim=1), n),
+            mesh=index(torch.stack((me.senders, me.receivers), dim=1)),
             mesh_receivers=me.receivers,
-            world=EdgeIndex.build(torch.stack((we.senders, we.receivers), dim=1), n),
+            world=index(torch.stack((we.senders, we.receivers), dim=1)),
             world_receivers=we.receivers,
-            face=EdgeIndex.build(torch.cat((fe.senders, fe.receivers), dim=1), n),
+            face=index(torch.cat((fe.senders, fe.receivers), dim=1)),
             face_receivers=fe.receivers.reshape(-1),
         )
 
@@ -209,8 +323,8 @@ class ProcessorBlock(nn.Module):
         w_v = torch.cat([m.first.weight[:, a:a + L] for m, _, a, _ in parts])  # [k * hidden, L]
         w_o = torch.cat([m.first.weight[:, b:b + L] for m, _, _, b in parts])
         b_o = torch.cat([m.first.bias for m, _, _, _ in parts])
-        nodes = F.linear(v, w_v).add_(F.linear(o, w_o, b_o).index_select(0, node_obj))
-        return [torch.addmm(pre, e, m.first.weight[:, :L].T)
+        nodes = linear(v, w_v).add_(linear(o, w_o, b_o).index_select(0, node_obj))
+        return [addmm(pre, e, m.first.weight[:, :L].T)
                 for pre, (m, e, _, _) in zip(nodes.chunk(len(parts), dim=1), parts, strict=True)]
 
     def forward(self, t: Topology, v: Tensor, o: Tensor, e: dict[str, Tensor]

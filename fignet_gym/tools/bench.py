@@ -7,22 +7,31 @@ edges; and MuJoCo's time to advance the same scene by the same simulated time, a
 shared cores are noisy: compare the ratios, measured in one run, rather than absolute numbers. On a
 machine whose cores are busy, use ``--threads 1``: OpenMP threads spin-waiting for a descheduled peer
 make more threads much slower (``OMP_WAIT_POLICY=PASSIVE`` limits the damage).
+
+``--shipped``: the shipped models at each ``--batch`` size, stepped as ``FIGNetDynamics`` does,
+with the network's analytic FLOPs and its GFLOP/s next to plain ``torch.mm`` on the same shapes
+(:mod:`fignet_gym.tools.bench_limits`). ``--rollout``: ``Dynamics.rollout`` scene-steps per second,
+learned against ``mujoco.rollout``. ``--json PATH`` writes their figures. Timings are CPU seconds.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import mujoco
 import numpy as np
 import torch
 
+from fignet_gym.dynamics.learned import CHUNK_NODES, batched_step
 from fignet_gym.mjcf import TossObject, push_scene_xml, toss_scene_xml
+from fignet_gym.pretrained import load_checkpoint
 from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
 from fignet_gym.simulator.scene import MeshOptions, Scene
 
@@ -102,11 +111,12 @@ class _PhaseTimer:
         method = getattr(self.sim, name)
 
         def timed(*args: Any, **kwargs: Any) -> Any:
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             out = method(*args, **kwargs)
-            self.seconds[name] = time.perf_counter() - t0
+            # Summed: a chunked batch calls each phase once per chunk.
+            self.seconds[name] = self.seconds.get(name, 0.0) + time.process_time() - t0
             if name == "collide" and out[0] is not None:
-                self.face_edges = out[0].num_contacts
+                self.face_edges += out[0].num_contacts
             return out
 
         return timed
@@ -121,8 +131,10 @@ class _PhaseTimer:
             delattr(self.sim, name)
 
 
-def time_learned_step(sim: LearnedSimulator, b: BenchScene, repeats: int, batch: int = 1) -> dict[str, float]:
-    """Median ms of each phase of ``sim.step`` on ``batch`` copies of the scene.
+def time_learned_step(sim: LearnedSimulator, b: BenchScene, repeats: int, batch: int = 1,
+                      chunked: bool = False) -> dict[str, float]:
+    """Median CPU ms of each phase of ``sim.step`` on ``batch`` copies of the scene (``chunked``:
+    through :func:`~fignet_gym.dynamics.learned.batched_step`, as ``FIGNetDynamics`` steps them).
 
     Phases: ``collision`` (:meth:`LearnedSimulator.collide`), ``graph`` (the rest of
     :meth:`LearnedSimulator.build_inputs`: poses to node positions and features), ``network``
@@ -136,9 +148,13 @@ def time_learned_step(sim: LearnedSimulator, b: BenchScene, repeats: int, batch:
     edges = []
     with _PhaseTimer(sim) as timer:
         for _ in range(repeats + 2):
-            t0 = time.perf_counter()
-            sim.step(scene, hist, nxt)
-            total = time.perf_counter() - t0
+            timer.seconds, timer.face_edges = {}, 0
+            t0 = time.process_time()
+            if chunked:
+                batched_step(sim, b.scene, batch, hist, nxt)
+            else:
+                sim.step(scene, hist, nxt)
+            total = time.process_time() - t0
             sec = timer.seconds
             parts["collision"].append(sec["collide"])
             parts["graph"].append(sec["build_inputs"] - sec["collide"])
@@ -158,9 +174,9 @@ def time_mujoco(b: BenchScene, repeats: int) -> float:
         d = mujoco.MjData(b.model)
         d.qpos[:], d.qvel[:] = b.data.qpos, b.data.qvel
         d.mocap_pos[:], d.mocap_quat[:] = b.data.mocap_pos, b.data.mocap_quat
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         mujoco.mj_step(b.model, d, b.substeps)
-        samples.append(time.perf_counter() - t0)
+        samples.append(time.process_time() - t0)
     return _median_ms(samples)
 
 
@@ -178,12 +194,96 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch", type=int, nargs="*", default=[1, 16], help="scene batch sizes")
     p.add_argument("--dtype", choices=("float32", "bfloat16"), default="float32",
                    help="network precision at inference (LearnedSimulator.inference_dtype)")
+    p.add_argument("--shipped", action="store_true",
+                   help="the shipped push/toss models at --batch sizes: FLOPs, GFLOP/s against the "
+                        "machine's matmul rate on the same shapes (skips the untrained configs)")
+    p.add_argument("--rollout", action="store_true",
+                   help="scene-steps/s of Dynamics.rollout (learned vs mujoco.rollout) at "
+                        "--rollout-batch over --rollout-steps steps")
+    p.add_argument("--rollout-batch", type=int, nargs="*", default=[1, 64, 256, 1024])
+    p.add_argument("--rollout-steps", type=int, default=25)
+    p.add_argument("--json", metavar="PATH", help="write every figure to this JSON file")
+
+
+def shipped_table(args: argparse.Namespace, dtype: torch.dtype, scenes: list[BenchScene]
+                  ) -> list[dict[str, Any]]:
+    """Per-scene cost of batched steps of the shipped models, with FLOPs and the matmul limit."""
+    from fignet_gym.tools.bench_limits import matmul_rate, network_flops
+
+    rows = []
+    print(f"\n== shipped models, steps batched as FIGNetDynamics does (chunks of <= {CHUNK_NODES} "
+          "nodes); CPU ms per scene")
+    print(f"{'scene':6s} {'B':>5s} {'total':>7s} {'network':>8s} {'x B=1':>6s} {'MFLOP':>7s} "
+          f"{'GFLOP/s':>8s} {'mm limit':>8s} {'of limit':>8s}")
+    for b in scenes:
+        name = b.name.split()[0]
+        sim = load_checkpoint(name).eval()
+        sim.inference_dtype = dtype
+        flops, _ = network_flops(sim, b.scene, b.history)
+        per_scene = sum(flops.values())
+        single = None
+        for batch in args.batch:
+            r = time_learned_step(sim, b, max(2, args.repeats // max(1, batch // 16)), batch, chunked=True)
+            chunk = max(1, min(batch, CHUNK_NODES // b.scene.num_nodes))
+            _, shapes = network_flops(sim, b.scene.repeat(chunk), b.history.repeat(1, chunk, 1))
+            limit = matmul_rate(shapes, repeats=3)
+            achieved = per_scene * batch / (r["network"] / 1000) / 1e9
+            total, net = r["total"] / batch, r["network"] / batch
+            single = single or total
+            rows.append({"scene": name, "batch": batch, "ms_per_scene": total,
+                         "network_ms_per_scene": net, "ratio_to_single": total / single,
+                         "mflop_per_scene_step": per_scene / 1e6,
+                         "mflop_per_block": {k: v / 1e6 for k, v in flops.items()},
+                         "gflops": achieved, "matmul_gflops_same_shapes": limit,
+                         "fraction_of_limit": achieved / limit})
+            print(f"{name:6s} {batch:5d} {total:7.3f} {net:8.3f} {total / single:6.2f} "
+                  f"{per_scene / 1e6:7.1f} {achieved:8.1f} {limit:8.1f} {achieved / limit:8.0%}")
+    print("'x B=1': per-scene cost over the first batch size's; 'mm limit': plain torch.mm GFLOP/s "
+          "on exactly the network's matmul shapes (one chunk), measured now")
+    return rows
+
+
+def rollout_table(args: argparse.Namespace, scenes: list[BenchScene]) -> dict[str, Any]:
+    """Dynamics.rollout throughput of the shipped models against mujoco.rollout."""
+    from fignet_gym.tools.bench_limits import time_rollouts
+
+    out: dict[str, Any] = {}
+    for b in scenes:
+        name = b.name.split()[0]
+        vel = np.array([0.1, 0.0, 0.0]) if b.model.nmocap else None
+        rows = time_rollouts(b.model, b.data, b.substeps, name, args.rollout_batch,
+                             args.rollout_steps, vel)
+        out[name] = rows
+        print(f"\n== Dynamics.rollout, {name}, {args.rollout_steps} steps: scene-steps per second "
+              "(learned: CPU s of this process)")
+        keys = [k for k in rows[0] if k not in ("batch", "steps")]
+        print(f"{'B':>5s} " + " ".join(f"{k:>18s}" for k in keys) + f" {'learned s':>10s}")
+        for r in rows:
+            print(f"{r['batch']:5d} " + " ".join(f"{r[k]['scene_steps_per_s']:18.0f}" for k in keys)
+                  + f" {r['learned']['seconds']:10.2f}")
+    return out
 
 
 def run(args: argparse.Namespace) -> None:
     """Benchmark paper-size and CPU-size models on the push and toss scenes."""
     if args.threads:
         torch.set_num_threads(args.threads)
+    if args.shipped or args.rollout:
+        dtype = getattr(torch, args.dtype)
+        print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, device cpu, network "
+              f"in {args.dtype}; mujoco {mujoco.__version__}; cuda available: "
+              f"{torch.cuda.is_available()} (not benchmarked)")
+        scenes = [push_bench_scene(), toss_bench_scene()]
+        report: dict[str, Any] = {"torch": torch.__version__, "threads": torch.get_num_threads(),
+                                  "device": "cpu", "dtype": args.dtype}
+        if args.shipped:
+            report["shipped"] = shipped_table(args, dtype, scenes)
+        if args.rollout:
+            report["rollout"] = rollout_table(args, scenes)
+        if args.json:
+            Path(args.json).write_text(json.dumps(report, indent=1))
+            print(f"wrote {args.json}")
+        return
     configs = {
         "paper (latent 128, 10 MP, mesh edges)": dict(latent_size=128, message_passing_steps=10),
         "cpu (latent 64, 5 MP, no mesh edges)": dict(latent_size=64, message_passing_steps=5,

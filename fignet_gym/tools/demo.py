@@ -1,12 +1,14 @@
-"""The main job: the shipped pretrained simulators against MuJoCo, no training needed.
+"""The main job: plan with the shipped learned simulator, act in MuJoCo; no training needed.
 
 ``fignet-gym demo`` (or ``bash scripts/demo.sh``):
 
-1. generates fresh held-out pushes and tosses with MuJoCo (seeds never used in training);
-2. rolls out the shipped learned simulators from their first poses, all scenes in one batch;
-3. prints errors against MuJoCo and against the no-motion and constant-velocity references;
-4. writes side-by-side videos (MuJoCo left, FIGNet right), error plots and ``summary.json``;
-5. runs the ``Push-v0`` environment on both dynamics with the same actions and compares them.
+1. runs a few seeded ``Push-v1`` episodes in MuJoCo with a CEM planner whose model is the shipped
+   FIGNet push simulator, and the same episodes with the same planner whose model is MuJoCo;
+2. prints a table (success, final position and heading errors, CPU and wall seconds per action);
+3. writes ``push_mpc.mp4`` (planning on FIGNet left, planning on MuJoCo right), ``push_mpc.png``
+   (distance to the goal against time) and ``summary.json``;
+4. with ``--rollouts``, also compares open-loop rollouts of the shipped simulators with MuJoCo
+   on fresh pushes and tosses (errors, videos and plots).
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ def _task(name: str, kind: str, num: int, out: Path, videos: int, horizon: int) 
 
 
 def _env_comparison(out: Path, steps: int = 40) -> dict[str, Any]:
-    """Same action sequence on Push-v0 with MuJoCo and with FIGNet dynamics."""
+    """Same action sequence on Push-v1 with MuJoCo and with FIGNet dynamics."""
     import gymnasium as gym
 
     import fignet_gym.envs  # noqa: F401 - registers the environments
@@ -54,7 +56,7 @@ def _env_comparison(out: Path, steps: int = 40) -> dict[str, Any]:
     actions = np.clip(np.array([[1.0, 0.0]]) + 0.3 * rng.normal(size=(steps, 2)), -1, 1)
     result: dict[str, Any] = {}
     for dyn in ("mujoco", "fignet"):
-        env = gym.make("fignet_gym/Push-v0", dynamics=dyn)
+        env = gym.make("fignet_gym/Push-v1", dynamics=dyn)
         obs, _ = env.reset(seed=0)
         t0 = time.perf_counter()
         total = 0.0
@@ -67,7 +69,7 @@ def _env_comparison(out: Path, steps: int = 40) -> dict[str, Any]:
                        "steps_per_s": steps / (time.perf_counter() - t0)}
         env.close()
     diff = np.abs(np.array(result["mujoco"]["final_obs"][:3]) - np.array(result["fignet"]["final_obs"][:3]))
-    print("\n=== Push-v0, same 40 actions on both dynamics ===")
+    print("\n=== Push-v1, same 40 actions on both dynamics ===")
     for dyn in ("mujoco", "fignet"):
         r = result[dyn]
         print(f"{dyn:7s} return {r['return']:8.3f}   {r['steps_per_s']:7.1f} env steps/s")
@@ -75,16 +77,116 @@ def _env_comparison(out: Path, steps: int = 40) -> dict[str, Any]:
     return result
 
 
-def run_demo(out: str = "outputs/demo", quick: bool = False) -> dict[str, Any]:
-    """Run the demo and write its outputs to ``out``; returns the summary."""
+def _mpc(out: Path, episodes: int, quick: bool) -> dict[str, Any]:
+    """CEM on the learned model and on MuJoCo, both acting in MuJoCo, on the same seeds."""
+    import gymnasium as gym
+    import imageio
+    import torch
+
+    import fignet_gym.envs  # noqa: F401  (registers the environments)
+    from fignet_gym.agents import make_planner, run_episode
+    from fignet_gym.dynamics import MujocoDynamics, make_dynamics
+    from fignet_gym.tools.plan import _label, summarize
+
+    torch.set_num_threads(1)
+    budget = {"horizon": 3, "population": 6, "iterations": 1, "replan_every": 1} if quick else {}
+    max_steps = 3 if quick else None
+    models = {"fignet": make_dynamics("fignet", None, "push"), "mujoco": MujocoDynamics(nthread=1)}
+    size = 96 if quick else 320
+    print(f"\n=== MPC on Push-v1: CEM planning on the shipped FIGNet push model vs on MuJoCo, "
+          f"both acting in MuJoCo ({episodes} seeded episodes) ===")
+    rows: dict[str, list[dict[str, Any]]] = {k: [] for k in models}
+    curves: dict[str, list[list[float]]] = {k: [] for k in models}
+    frames: dict[str, list[np.ndarray]] = {k: [] for k in models}
+    for k in range(episodes):
+        seed = DEMO_SEED + k
+        ends = {}
+        for name, dyn in models.items():
+            env = gym.make("fignet_gym/Push-v1", render_mode="rgb_array", width=size, height=size)
+            planner = make_planner("cem", dyn, "push", env=env, **budget)
+            curve: list[float] = []
+            shots: list[np.ndarray] = []
+
+            def grab(e: Any, _p: Any, curve: list[float] = curve, shots: list = shots) -> None:
+                u = e.unwrapped
+                curve.append(float(u.task.errors(u.get_state(), u.goal)[0]))
+                shots.append(u.render())
+
+            env.reset(seed=seed)
+            start = env.unwrapped
+            curve.append(float(start.task.errors(start.get_state(), start.goal)[0]))
+            shots.append(start.render())
+            t0 = time.perf_counter()
+            row = {"seed": seed, **run_episode(env, planner, seed=seed, max_steps=max_steps,
+                                               on_step=grab)}
+            row["seconds"] = time.perf_counter() - t0
+            rows[name].append(row)
+            curves[name].append(curve)
+            ends[name] = shots
+            env.close()
+            print(f"  seed {seed} planning on {name:6s}: success {row['is_success']!s:5s} "
+                  f"in {row['length']:2d} steps, {row['position_error'] * 1000:5.1f} mm, "
+                  f"{row['orientation_error']:.3f} rad, "
+                  f"{row['plan_cpu_seconds']:.2f} CPU-s per action", flush=True)
+        n = max(len(v) for v in ends.values())
+        for name, shots in ends.items():  # hold the last frame of the shorter episode
+            frames[name] += shots + [shots[-1]] * (n - len(shots))
+    summary = {name: summarize(r) for name, r in rows.items()}
+    print(f"\n{'planning model':16s} {'success':>8s} {'pos. err (mm)':>14s} "
+          f"{'heading (rad)':>14s} {'CPU-s/action':>13s} {'wall s/action':>14s}")
+    for name, sm in summary.items():
+        spa = sm["seconds_per_action"]
+        ok = sum(r["is_success"] for r in rows[name])
+        print(f"{name:16s} {ok:>4d}/{len(rows[name]):<3d} {sm['median_position_error'] * 1000:14.1f} "
+              f"{sm['median_orientation_error']:14.3f} {spa['cpu']:13.3f} {spa['wall']:14.3f}")
+    print("(errors: medians of the final errors; success: within 1 cm and 0.2 rad)")
+    video = [np.concatenate([_label(a, "plans on FIGNet"), _label(b, "plans on MuJoCo")], axis=1)
+             for a, b in zip(frames["fignet"], frames["mujoco"], strict=True)]
+    imageio.mimsave(out / "push_mpc.mp4", video, fps=50)
+    _plot_mpc(curves, out / "push_mpc.png")
+    return {"summary": summary, "episodes": rows}
+
+
+def _plot_mpc(curves: dict[str, list[list[float]]], path: Path) -> None:
+    """Distance from the goal against time, every episode, one colour per planning model."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    for (name, eps), colour in zip(curves.items(), ("tab:blue", "tab:orange"), strict=False):
+        for i, c in enumerate(eps):
+            t = np.arange(len(c)) * 0.02
+            ax.plot(t, np.array(c) * 1000, color=colour, alpha=0.8,
+                    label=f"plans on {name}" if i == 0 else None)
+    ax.axhline(10.0, color="grey", ls="--", lw=1, label="success (1 cm)")
+    ax.set(xlabel="time (s)", ylabel="object to goal (mm)", title="Push-v1, acting in MuJoCo")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def run_demo(
+    out: str = "outputs/demo", quick: bool = False, episodes: int = 3, rollouts: bool = False
+) -> dict[str, Any]:
+    """Run the demo and write its outputs to ``out``; returns the summary.
+
+    Args:
+        out: output folder. quick: a tiny budget (tests). episodes: seeded Push-v1 episodes per
+            planning model. rollouts: also compare open-loop rollouts with MuJoCo.
+    """
     outdir = Path(out)
     outdir.mkdir(parents=True, exist_ok=True)
-    n, v = (4, 0) if quick else (16, 2)
-    summary = {
-        "push": _task("push", "push", n, outdir, v, horizon=25),
-        "toss": _task("toss", "toss-simple", max(2, n // 2), outdir, min(v, 1), horizon=50),
-    }
-    summary["env"] = _env_comparison(outdir)
+    t0 = time.perf_counter()
+    summary: dict[str, Any] = {"mpc": _mpc(outdir, 1 if quick else episodes, quick)}
+    if rollouts:
+        n, v = (4, 0) if quick else (16, 2)
+        summary["push"] = _task("push", "push", n, outdir, v, horizon=25)
+        summary["toss"] = _task("toss", "toss-simple", max(2, n // 2), outdir, min(v, 1), horizon=50)
+        summary["env"] = _env_comparison(outdir)
     (outdir / "summary.json").write_text(json.dumps(summary, indent=2))
-    print(f"\nwrote videos, plots and summary.json to {outdir.resolve()}")
+    print(f"\nwrote push_mpc.mp4, push_mpc.png and summary.json to {outdir.resolve()} "
+          f"in {time.perf_counter() - t0:.0f} s")
     return summary

@@ -426,12 +426,7 @@ def rollout_metrics(sim: LearnedSimulator, trajs: list[Trajectory], scenes: list
                            trues[i][horizon]) for i in reach]
     gains = [x for x in gains if math.isfinite(x)]
     out["rotation_gain"] = float(np.median(gains)) if gains else math.nan
-    pen_p = float(np.mean([floor_penetration(s, p[H:]).mean()
-                           for s, p in zip(scenes, preds, strict=True)]))
-    pen_t = float(np.mean([floor_penetration(s, t[H:]).mean()
-                           for s, t in zip(scenes, trues, strict=True)]))
-    out["penetration_ratio"] = pen_p / pen_t if pen_t > 0 else math.nan
-    out["penetration_m"] = pen_p
+    out.update(_penetration(scenes, preds, trues, H))
     return out
 
 
@@ -441,17 +436,22 @@ def predictor_metrics(trajs: list[Trajectory], preds: list[np.ndarray], given: i
     say) on trajectories, with the same keys as :func:`rollout_metrics`'s rollout errors."""
     scenes = [build_scene(t) for t in trajs]
     trues = [torch.as_tensor(t.poses, dtype=torch.float32) for t in trajs]
-    out = score_rollouts(scenes, trues, [torch.as_tensor(np.asarray(p), dtype=torch.float32)
-                                         for p in preds], given, horizon, [t.name for t in trajs])
+    pred_t = [torch.as_tensor(np.asarray(p), dtype=torch.float32) for p in preds]
+    out = score_rollouts(scenes, trues, pred_t, given, horizon, [t.name for t in trajs])
     out.update(seconds=horizon * trajs[0].dt, dt=trajs[0].dt)
-    pred_t = [torch.as_tensor(np.asarray(x), dtype=torch.float32) for x in preds]
-    pen_p = float(np.mean([floor_penetration(s, p[given:]).mean()
-                           for s, p in zip(scenes, pred_t, strict=True)]))
-    pen_t = float(np.mean([floor_penetration(s, t[given:]).mean()
-                           for s, t in zip(scenes, trues, strict=True)]))
-    out["penetration_ratio"] = pen_p / pen_t if pen_t > 0 else math.nan
-    out["penetration_m"] = pen_p
+    out.update(_penetration(scenes, pred_t, trues, given))
     return out
+
+
+def _penetration(scenes: list[Scene], preds: list[Tensor], trues: list[Tensor],
+                 start: int) -> dict[str, float]:
+    """Mean floor penetration (m) of predicted poses ``float[T_i, O_i, 7]`` from step ``start``
+    on, and its ratio to the ground truth's (NaN when the truth never penetrates)."""
+    pen_p = float(np.mean([floor_penetration(s, p[start:]).mean()
+                           for s, p in zip(scenes, preds, strict=True)]))
+    pen_t = float(np.mean([floor_penetration(s, t[start:]).mean()
+                           for s, t in zip(scenes, trues, strict=True)]))
+    return {"penetration_ratio": pen_p / pen_t if pen_t > 0 else math.nan, "penetration_m": pen_p}
 
 
 def perturbation_floor(trajs: list[Trajectory], position_noise: float, history: int = 2,

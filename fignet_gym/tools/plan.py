@@ -1,0 +1,209 @@
+"""``fignet-gym plan``: seeded episodes of a planner (or a baseline) acting in an environment.
+
+    fignet-gym plan --env fignet_gym/Push-v1 --dynamics fignet --planner cem --episodes 50 \\
+        --seed 0 --out runs/plan-fignet --videos 2
+
+The planner plans with ``--dynamics`` (MuJoCo, or the shipped/given FIGNet model) and acts in the
+environment with ``--act-dynamics`` (MuJoCo by default: "reality"). Each finished episode is
+appended to ``OUT/episodes.jsonl`` and ``OUT/summary.json`` is rewritten, so a killed run resumes
+with ``--resume``. ``--videos K`` writes, for the first K episodes, the episode (left) beside what
+the planning model predicted at the end of its current plan (right).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+BASELINES = ("idle", "random")
+
+
+class PlanError(ValueError):
+    """A user error in the ``plan`` arguments (reported as one ``error:`` line)."""
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``plan`` sub-command's arguments."""
+    p.add_argument("--env", default="fignet_gym/Push-v1", help="environment id")
+    p.add_argument("--dynamics", default="mujoco", choices=["mujoco", "fignet"],
+                   help="the planner's model")
+    p.add_argument("--checkpoint", help="fignet: checkpoint path or pretrained name (default: "
+                   "the shipped simulator of the env's scene)")
+    p.add_argument("--planner", default="cem", choices=["cem", "mppi", *BASELINES])
+    p.add_argument("--act-dynamics", default="mujoco", choices=["mujoco", "fignet"],
+                   help="what the environment acts with")
+    p.add_argument("--episodes", type=int, default=10)
+    p.add_argument("--seed", type=int, default=0, help="episode k is reset with seed + k")
+    p.add_argument("--out", required=True, help="folder for summary.json, episodes.jsonl, videos")
+    p.add_argument("--videos", type=int, default=0, help="side-by-side videos of the first K")
+    p.add_argument("--resume", action="store_true", help="skip episodes already in OUT")
+    p.add_argument("--horizon", type=int, help="override the preset planning horizon")
+    p.add_argument("--population", type=int, help="override the preset candidates per iteration")
+    p.add_argument("--iterations", type=int, help="override the preset iterations")
+    p.add_argument("--replan-every", type=int, help="override the preset re-planning period")
+    p.add_argument("--threads", type=int, default=1, help="torch and MuJoCo rollout threads")
+
+
+def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Aggregates of per-episode rows (see :func:`run`)."""
+    steps = np.array([r["length"] for r in rows], dtype=float)
+    out: dict[str, Any] = {"episodes": len(rows)}
+    if rows and "is_success" in rows[0]:
+        out["success_rate"] = float(np.mean([r["is_success"] for r in rows]))
+        out["median_position_error"] = float(np.median([r["position_error"] for r in rows]))
+        out["median_orientation_error"] = float(np.median([r["orientation_error"] for r in rows]))
+    if rows and "num_in_target" in rows[0]:
+        out["mean_in_target"] = float(np.mean([r["num_in_target"] for r in rows]))
+    if rows:
+        out["mean_return"] = float(np.mean([r["return"] for r in rows]))
+        out["seconds_per_action"] = {
+            "wall": float(np.sum([r["plan_seconds"] * r["length"] for r in rows]) / steps.sum()),
+            "cpu": float(np.sum([r["plan_cpu_seconds"] * r["length"] for r in rows]) / steps.sum()),
+        }
+        out["diverged_episodes"] = int(sum(r["diverged"] for r in rows))
+    return out
+
+
+def print_table(label: str, rows: list[dict[str, Any]], summary: dict[str, Any]) -> None:
+    """Per-episode rows, then the summary line."""
+    push = "is_success" in (rows[0] if rows else {})
+    head = "success  pos. err (mm)  heading err (rad)" if push else "in target"
+    print(f"\n{label}\n{'seed':>6s}  {'steps':>5s}  {head}  {'s/action (cpu)':>14s}")
+    for r in rows:
+        if push:
+            body = (f"{str(r['is_success']):>7s}  {r['position_error'] * 1000:13.1f}  "
+                    f"{r['orientation_error']:17.3f}")
+        else:
+            body = f"{r['num_in_target']:9d}"
+        print(f"{r['seed']:6d}  {r['length']:5d}  {body}  {r['plan_cpu_seconds']:14.3f}")
+    spa = summary.get("seconds_per_action", {})
+    if push:
+        print(f"success {summary['success_rate']:.0%} of {summary['episodes']}, median errors "
+              f"{summary['median_position_error'] * 1000:.1f} mm / "
+              f"{summary['median_orientation_error']:.3f} rad, "
+              f"{spa.get('cpu', 0):.3f} CPU-s ({spa.get('wall', 0):.3f} s wall) per action")
+    else:
+        print(f"mean objects in target {summary['mean_in_target']:.2f} over {summary['episodes']}"
+              f" episodes, {spa.get('cpu', 0):.3f} CPU-s per action")
+
+
+class SideBySide:
+    """Frames of an episode (left) beside the planning model's prediction (right)."""
+
+    def __init__(self, env_id: str, env_kwargs: dict[str, Any], width: int = 320) -> None:
+        import gymnasium as gym
+
+        self.imagined = gym.make(env_id, render_mode="rgb_array", width=width, height=width,
+                                 **env_kwargs).unwrapped
+        self.imagined.reset(seed=0)
+        self.frames: list[np.ndarray] = []
+
+    def __call__(self, env: Any, planner: Any) -> None:
+        """``run_episode``'s ``on_step``: grab both frames."""
+        u = env.unwrapped
+        left = u.render()
+        pred = getattr(planner, "prediction", None)
+        for attr in ("goal", "target"):
+            if hasattr(u, attr):
+                setattr(self.imagined, attr, np.copy(getattr(u, attr)))
+        self.imagined.set_state(pred[-1] if pred is not None else u.get_state())
+        right = self.imagined.render()
+        self.frames.append(np.concatenate([_label(left, "acting (MuJoCo)"),
+                                           _label(right, "planner's prediction")], axis=1))
+
+    def write(self, path: Path, fps: int) -> None:
+        """An mp4 of the collected frames."""
+        import imageio
+
+        if self.frames:
+            imageio.mimsave(path, self.frames, fps=fps)
+        self.frames = []
+
+
+def _label(frame: np.ndarray, text: str) -> np.ndarray:
+    """``uint8[H, W, 3]`` with ``text`` in its top-left corner."""
+    from PIL import Image, ImageDraw
+
+    img = Image.fromarray(frame)
+    ImageDraw.Draw(img).text((6, 4), text, fill=(0, 0, 0))
+    return np.asarray(img)
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    """Run the episodes, print the table, write ``OUT/summary.json``; returns the summary."""
+    import gymnasium as gym
+    import torch
+    from tqdm import tqdm
+
+    import fignet_gym.envs  # noqa: F401  (registers the environments)
+    from fignet_gym.agents import IdleAgent, RandomAgent, make_planner, run_episode
+    from fignet_gym.dynamics import MujocoDynamics, make_dynamics
+
+    torch.set_num_threads(max(1, args.threads))
+    if args.episodes < 1:
+        raise PlanError(f"--episodes must be >= 1, got {args.episodes}")
+    if args.env not in gym.registry:
+        ids = sorted(k for k in gym.registry if k.startswith("fignet_gym/"))
+        raise PlanError(f"--env: unknown environment {args.env!r}; use one of {ids}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    env_kwargs = {"dynamics": args.act_dynamics}
+    render = {"render_mode": "rgb_array", "width": 320, "height": 320} if args.videos else {}
+    env = gym.make(args.env, **render, **env_kwargs)
+    scene = env.unwrapped.scene_type
+    if args.planner in BASELINES:
+        agent: Any = (IdleAgent if args.planner == "idle" else RandomAgent)(seed=args.seed)
+        label = f"{args.planner} on {args.env}"
+    else:
+        try:
+            if args.dynamics == "mujoco":
+                if args.checkpoint:
+                    raise ValueError("--checkpoint only applies to --dynamics fignet")
+                dyn = MujocoDynamics(nthread=args.threads)
+            else:
+                dyn = make_dynamics("fignet", args.checkpoint, scene)
+            agent = make_planner(
+                args.planner, dyn, scene, env=env, horizon=args.horizon,
+                population=args.population, iterations=args.iterations,
+                replan_every=args.replan_every, **({"seed": args.seed} if args.seed else {}),
+            )
+        except ValueError as err:  # a checkpoint of another scene, a bad budget
+            raise PlanError(str(err)) from None
+        label = f"{args.planner.upper()} planning on {args.dynamics}, acting in {args.act_dynamics}"
+    rows_path = out / "episodes.jsonl"
+    rows: list[dict[str, Any]] = []
+    if args.resume and rows_path.exists():
+        rows = [json.loads(line) for line in rows_path.read_text().splitlines() if line.strip()]
+    elif rows_path.exists():
+        rows_path.unlink()
+    done = {r["seed"] for r in rows}
+    config = getattr(agent, "config", None)
+    meta = {"env": args.env, "planner": args.planner, "dynamics": args.dynamics,
+            "act_dynamics": args.act_dynamics, "checkpoint": args.checkpoint,
+            "config": config.__dict__ if config is not None else None,
+            "threads": args.threads}
+    todo = [args.seed + k for k in range(args.episodes) if args.seed + k not in done]
+    for seed in tqdm(todo, desc=label, unit="episode"):
+        k = seed - args.seed
+        video = SideBySide(args.env, env_kwargs) if k < args.videos else None
+        t0 = time.perf_counter()
+        row = {"seed": seed, **run_episode(env, agent, seed=seed, on_step=video)}
+        row["seconds"] = time.perf_counter() - t0
+        rows.append(row)
+        with rows_path.open("a") as f:
+            f.write(json.dumps(row) + "\n")
+        if video is not None:
+            video.write(out / f"episode_{seed}.mp4", env.metadata["render_fps"])
+        summary = {**meta, **summarize(rows), "rows": sorted(rows, key=lambda r: r["seed"])}
+        (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    rows.sort(key=lambda r: r["seed"])
+    summary = {**meta, **summarize(rows), "rows": rows}
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    print_table(label, rows, summary)
+    print(f"wrote {out / 'summary.json'}")
+    return summary

@@ -1,0 +1,204 @@
+"""``fignet-gym ppo``: a run folder that resumes after a stop, its logs, errors and transfer table."""
+
+from __future__ import annotations
+
+import json
+import pickle
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from stable_baselines3 import PPO
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from fignet_gym.agents.ppo import PPOConfig
+from fignet_gym.agents.ppo_run import (
+    EVAL_SEED,
+    NormalizedPolicy,
+    RunConfig,
+    RunError,
+    load_run_policy,
+    read_csv,
+    run_ppo,
+    transfer_table,
+)
+from fignet_gym.cli import main
+
+PUSH = "fignet_gym/Push-v0"
+#: 2 envs x 16 steps = 32 steps per PPO iteration, 2 minibatches of 16, 1 epoch.
+TINY = RunConfig(
+    env_id=PUSH,
+    dynamics="mujoco",
+    ppo=PPOConfig(total_timesteps=128, num_envs=2, n_steps=16, batch_size=16, n_epochs=1),
+    eval_every=32,
+    eval_episodes=1,
+    final_episodes=2,
+    checkpoint_every=64,
+)
+
+
+def steps(path: Path) -> list[int]:
+    return [int(r["step"]) for r in read_csv(path)]
+
+
+def tb_steps(root: Path, tag: str) -> list[int]:
+    acc = EventAccumulator(str(root / "tb"))
+    acc.Reload()
+    return [e.step for e in acc.Scalars(tag)]
+
+
+@pytest.fixture(scope="module")
+def stopped_and_resumed(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
+    """A run stopped at step 96 (last checkpoint: 64), facts about it, then resumed to 128."""
+    root = tmp_path_factory.mktemp("ppo") / "run"
+    assert run_ppo(root, TINY, stop_at=96, progress=False) == {}
+    facts: dict[str, object] = {
+        "root": root,
+        "steps_stopped": steps(root / "progress.csv"),
+        "tb_stopped": tb_steps(root, "eval/mujoco/mean_return"),
+        "ckpt_state": torch.load(root / "checkpoint" / "state.pt", weights_only=False),
+        "ckpt_model": PPO.load(root / "checkpoint" / "model.zip", device="cpu"),
+    }
+    with (root / "checkpoint" / "vecnormalize.pkl").open("rb") as f:
+        facts["ckpt_count"] = float(pickle.load(f).obs_rms.count)
+    facts["result"] = run_ppo(root, TINY, resume=True, progress=False)
+    return facts
+
+
+def test_stopped_run_checkpoints_policy_optimizer_and_counter(stopped_and_resumed: dict) -> None:
+    f = stopped_and_resumed
+    assert f["steps_stopped"] == [32, 64, 96]  # the row at 96 was logged after the checkpoint
+    assert f["tb_stopped"] == [32, 64, 96]
+    assert f["ckpt_state"]["num_timesteps"] == 64
+    assert len(f["ckpt_state"]["rng"]["envs"]) == 2
+    # Adam's own step counter: 2 updates x 1 epoch x (32 / 16) minibatches.
+    adam = f["ckpt_model"].policy.optimizer.state_dict()["state"]
+    assert adam and {int(s["step"]) for s in adam.values()} == {4}
+
+
+def test_resumed_run_reaches_the_budget_and_logs_each_step_once(stopped_and_resumed: dict) -> None:
+    f = stopped_and_resumed
+    root: Path = f["root"]
+    assert f["result"]["timesteps"] == 128
+    assert steps(root / "progress.csv") == [32, 64, 96, 128]
+    assert steps(root / "eval.csv") == [32, 64, 96, 128]
+    # TensorBoard hides the killed process's events after the checkpoint (purge_step).
+    assert tb_steps(root, "eval/mujoco/mean_return") == [32, 64, 96, 128]
+    assert len(list((root / "tb").glob("events.out.tfevents.*"))) == 2
+    its = [float(r["time/iterations"]) for r in read_csv(root / "progress.csv")]
+    assert its == [1, 2, 1, 2]  # SB3 counts iterations per learn() call: rows 96, 128 are new
+    # The normaliser continued from the checkpoint: + 2 reset observations + 32 steps x 2 envs.
+    with (root / "vecnormalize.pkl").open("rb") as fh:
+        assert float(pickle.load(fh).obs_rms.count) == pytest.approx(f["ckpt_count"] + 2 + 64)
+    # ... and so did the optimizer: 2 more updates of 2 minibatches.
+    adam = PPO.load(root / "policy.zip", device="cpu").policy.optimizer.state_dict()["state"]
+    assert {int(s["step"]) for s in adam.values()} == {8}
+
+
+def test_final_eval_covers_both_dynamics_on_the_same_seeds(stopped_and_resumed: dict) -> None:
+    res = stopped_and_resumed["result"]
+    assert set(res["eval"]) == {"mujoco", "fignet"}
+    for rep in res["eval"].values():
+        assert rep["n_episodes"] == TINY.final_episodes
+        assert np.isfinite(rep["episode_returns"]).all()
+    saved = json.loads((stopped_and_resumed["root"] / "final_eval.json").read_text())
+    assert saved["eval"]["mujoco"]["episode_returns"] == res["eval"]["mujoco"]["episode_returns"]
+    assert EVAL_SEED > TINY.ppo.seed + TINY.ppo.num_envs
+
+
+def test_transfer_table_rows_and_cli(stopped_and_resumed: dict, capsys: pytest.CaptureFixture) -> None:
+    root: Path = stopped_and_resumed["root"]
+    res = stopped_and_resumed["result"]
+    table = transfer_table([root])
+    row = table.splitlines()[2]
+    m, f = res["eval"]["mujoco"], res["eval"]["fignet"]
+    assert row.startswith("| mujoco (run) | 128 |")
+    assert f"| {m['mean_return']:.1f} |" in row and f"| {f['mean_return']:.1f} |" in row
+    assert main(["ppo-table", str(root), "--out", str(root / "table.md"),
+                 "--plot", str(root / "curves.png")]) == 0
+    assert capsys.readouterr().out.strip().splitlines()[:-1] == table.splitlines()
+    assert (root / "curves.png").stat().st_size > 10_000
+    assert (root / "table.md").read_text().strip() == table
+    assert main(["ppo-table", str(root.parent / "missing")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and "final_eval.json" in err[0]
+
+
+def test_normalized_policy_acts_on_raw_observations(stopped_and_resumed: dict) -> None:
+    policy = load_run_policy(stopped_and_resumed["root"])
+    rms = policy.normalizer.obs_rms
+    raw = np.random.default_rng(0).normal(size=(3, 19)).astype(np.float32)
+    by_hand = np.clip((raw - rms.mean) / np.sqrt(rms.var + policy.normalizer.epsilon), -10, 10)
+    expected = policy.model.predict(by_hand.astype(np.float32), deterministic=True)[0]
+    np.testing.assert_allclose(policy.predict(raw, deterministic=True)[0], expected, rtol=1e-6)
+    bare = NormalizedPolicy(policy.model, None)  # without it, a different action: the stats matter
+    assert not np.allclose(bare.predict(raw, deterministic=True)[0], expected)
+
+
+def test_existing_folder_needs_resume_or_force(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    args = ["ppo", "--env", PUSH, "--dynamics", "mujoco", "--steps", "32", "--out", str(out),
+            "--num-envs", "2", "--n-steps", "16", "--batch-size", "16", "--n-epochs", "1",
+            "--eval-every", "0", "--final-episodes", "1", "--quiet"]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and "--resume" in err[0]
+    assert (out / "notes.txt").exists()
+    assert main(["ppo", *args[1:], "--env", "fignet_gym/Nope-v0"]) == 2
+    assert "not registered" in capsys.readouterr().err
+    assert main([*args, "--force"]) == 0
+    assert not (out / "notes.txt").exists() and (out / "final_eval.json").exists()
+    assert "| mujoco (run) | 32 |" in capsys.readouterr().out
+    # Resuming with other settings than the saved ones is refused, naming them.
+    with pytest.raises(RunError, match="dynamics"):
+        run_ppo(out, RunConfig.from_json({**json.loads((out / "config.json").read_text()),
+                                          "dynamics": "fignet"}), resume=True, progress=False)
+    assert main([*args, "--resume", "--seed", "3"]) == 2
+    assert "ppo" in capsys.readouterr().err
+
+
+def test_finished_run_can_be_extended(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    cfg = RunConfig(env_id=PUSH, dynamics="mujoco", eval_every=0, final_episodes=1,
+                    ppo=PPOConfig(total_timesteps=32, num_envs=2, n_steps=16, batch_size=16, n_epochs=1))
+    assert run_ppo(out, cfg, progress=False)["timesteps"] == 32
+    more = RunConfig.from_json({**cfg.to_json(), "ppo": {**cfg.to_json()["ppo"], "total_timesteps": 64}})
+    assert run_ppo(out, more, resume=True, progress=False)["timesteps"] == 64
+    assert steps(out / "progress.csv") == [32, 64]
+    shutil.rmtree(out)
+
+
+@pytest.mark.slow
+def test_killed_process_resumes(tmp_path: Path) -> None:
+    """SIGKILL a `fignet-gym ppo` process after its first checkpoint; --resume completes it."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "run"
+    args = [sys.executable, "-m", "fignet_gym.cli", "ppo", "--env", PUSH, "--dynamics", "mujoco",
+            "--steps", "4096", "--out", str(out), "--num-envs", "2", "--n-steps", "16",
+            "--batch-size", "16", "--n-epochs", "1", "--eval-every", "0", "--final-episodes", "1",
+            "--checkpoint-every", "64", "--quiet"]
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    proc = subprocess.Popen(args, env=env)
+    try:
+        while not (out / "checkpoint" / "state.pt").exists():
+            assert proc.poll() is None, "the run ended before its first checkpoint"
+            time.sleep(0.2)
+        time.sleep(1.0)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    done = torch.load(out / "checkpoint" / "state.pt", weights_only=False)["num_timesteps"]
+    assert 64 <= done < 4096
+    subprocess.run([*args, "--resume"], env=env, check=True, capture_output=True)
+    rows = steps(out / "progress.csv")
+    assert rows == list(range(32, 4096 + 1, 32))
+    assert json.loads((out / "final_eval.json").read_text())["timesteps"] == 4096
