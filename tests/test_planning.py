@@ -359,3 +359,17 @@ def test_plan_resume_drops_a_partial_last_line(tmp_path: Any) -> None:
     path.write_text('{"seed": 0\n' + json.dumps({"seed": 1}) + "\n")  # damage mid-file: refuse
     with pytest.raises(PlanError, match="line 1"):
         read_rows(path)
+
+
+@pytest.mark.parametrize(("planner_cls", "config"), [(CEMPlanner, TINY_CEM), (MPPIPlanner, TINY_MPPI)])
+def test_prediction_is_dropped_when_every_candidate_diverges(planner_cls: type, config: Any) -> None:
+    from dataclasses import replace
+
+    env = gym.make("fignet_gym/Push-v1")
+    env.reset(seed=0)
+    planner = planner_cls(MujocoDynamics(), replace(config, replan_every=1), env=env)
+    planner.plan(env)
+    assert planner.prediction is not None
+    planner.costs = lambda state, actions: (np.full(len(actions), np.inf), None)
+    planner.plan(env)
+    assert planner.prediction is None
