@@ -356,6 +356,9 @@ def test_plan_resume_drops_a_partial_last_line(tmp_path: Any) -> None:
     path.write_text(json.dumps({"seed": 0}) + "\n" + '{"seed": 1, "ret')
     assert read_rows(path) == [{"seed": 0}]
     assert path.read_text() == json.dumps({"seed": 0}) + "\n"
+    path.write_text(json.dumps({"seed": 0}) + "\n" + json.dumps({"seed": 1}))  # cut before "\n"
+    assert read_rows(path) == [{"seed": 0}, {"seed": 1}]
+    assert path.read_text().endswith("}\n")
     path.write_text('{"seed": 0\n' + json.dumps({"seed": 1}) + "\n")  # damage mid-file: refuse
     with pytest.raises(PlanError, match="line 1"):
         read_rows(path)

@@ -66,9 +66,10 @@ def read_rows(path: Path) -> list[dict[str, Any]]:
             rows.append(json.loads(line))
         except json.JSONDecodeError:
             if i == len(lines) - 1 and not text.endswith("\n"):
-                write_text(path, "".join(json.dumps(r) + "\n" for r in rows))
                 break
             raise PlanError(f"{path}: line {i + 1} is not JSON") from None
+    if text and not text.endswith("\n"):  # cut mid-append, maybe just before its newline
+        write_text(path, "".join(json.dumps(r) + "\n" for r in rows))
     return rows
 
 
