@@ -171,7 +171,8 @@ class SamplingPlanner:
         plan_actions: ``float64[T, A]`` the current plan (after ``plan``: its first row was
             returned); the next ``plan`` starts from it shifted by one step.
         prediction: ``float64[T', nstate]`` the planning model's predicted states of the chosen
-            candidate (``None`` before a plan or when every candidate diverged).
+            candidate (``None`` before a plan or when every candidate of the last optimisation
+            diverged). MPPI: the lowest-cost sample's, not the executed weighted-mean plan's.
         last: :class:`PlanInfo` of the last call.
     """
 
@@ -349,6 +350,7 @@ class CEMPlanner(SamplingPlanner):
 
     def _optimise(self, state: np.ndarray) -> tuple[float, int, int]:
         cfg = self.config
+        self.prediction = None  # a call where every candidate diverges predicts nothing
         mean = self.plan_actions.copy()
         std = np.full_like(mean, cfg.noise_std)
         best, best_cost, diverged = mean, np.inf, 0
@@ -374,6 +376,7 @@ class MPPIPlanner(SamplingPlanner):
 
     Weights are ``exp(-(cost - min cost) / temperature)`` over the finite-cost candidates; the
     returned action is the first step of the weighted mean (clipped to ``[-1, 1]``).
+    ``prediction`` is the best sample's predicted states (the weighted mean is not rolled out).
 
     Args:
         dynamics: any :class:`Dynamics`. config: :class:`MPPIConfig`. env, model: see
@@ -385,6 +388,7 @@ class MPPIPlanner(SamplingPlanner):
 
     def _optimise(self, state: np.ndarray) -> tuple[float, int, int]:
         cfg = self.config
+        self.prediction = None  # a call where every candidate diverges predicts nothing
         mean, best_cost, diverged = self.plan_actions.copy(), np.inf, 0
         for _ in range(cfg.iterations):
             actions = self._sample(mean, cfg.noise_std)
@@ -406,8 +410,9 @@ class MPPIPlanner(SamplingPlanner):
 
 
 #: Planning budgets per scene (the benchmark's, ``docs/experiments.md`` "Issue 13"): Push plans 20
-#: steps (0.4 s) ahead with smooth, saturating candidates and re-plans every 2 actions (so the
-#: learned model costs <= 1 CPU-s per action on one core); Toss plans one release.
+#: steps (0.4 s) ahead with smooth, saturating candidates and re-plans every 2 actions (to keep the
+#: learned model's cost per action affordable on one core: docs/experiments.md, Issue 13,
+#: "The planner"); Toss plans one release.
 PRESETS: dict[str, dict[str, Any]] = {
     "push": {"horizon": 20, "population": 20, "iterations": 2, "noise_std": 1.0,
              "noise_correlation": 0.8, "terminal_weight": 10.0, "replan_every": 2,

@@ -58,6 +58,7 @@ from stable_baselines3.common.logger import (
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize
 
 from fignet_gym.agents.ppo import PPOConfig, evaluate_policy_on, torch_threads
+from fignet_gym.atomic import write_text
 from fignet_gym.envs.sb3 import SB3VecEnvAdapter, make_sb3_vec_env
 
 #: Training dynamics a run accepts (the env's ``dynamics=`` names).
@@ -488,7 +489,7 @@ def run_ppo(
     resuming = _prepare_dir(root, resume, force)
     if (root / "config.json").exists():
         cfg = _check_same(RunConfig.from_json(json.loads((root / "config.json").read_text())), cfg, root)
-    (root / "config.json").write_text(json.dumps(cfg.to_json(), indent=2))
+    write_text(root / "config.json", json.dumps(cfg.to_json(), indent=2))
 
     learned = cfg.dynamics != "mujoco"
     threads = cfg.ppo.torch_threads if cfg.ppo.torch_threads is not None else (1 if learned else None)
@@ -544,7 +545,8 @@ def run_ppo(
         logger.close()
         cpu = float(torch.load(root / "checkpoint" / "state.pt", weights_only=False)["cpu_seconds"])
         wall = float(torch.load(root / "checkpoint" / "state.pt", weights_only=False)["wall_seconds"])
-        model.save(root / "policy.zip")
+        model.save(root / "policy.tmp.zip")  # a kill mid-save must not leave a torn policy.zip
+        os.replace(root / "policy.tmp.zip", root / "policy.zip")
         vec.save(str(root / "vecnormalize.pkl"))
         vec.close()
         policy = load_run_policy(root)
@@ -556,11 +558,34 @@ def run_ppo(
         "wall_seconds": wall,
         "eval": reports,
     }
-    (root / "final_eval.json").write_text(json.dumps(result, indent=2))
+    write_text(root / "final_eval.json", json.dumps(result, indent=2))
     return result
 
 
 # ----------------------------------------------------------------------------- transfer table
+def read_final_eval(path: Path) -> dict[str, Any]:
+    """A run's ``final_eval.json``, checked for what :func:`transfer_table` reads.
+
+    Raises ``ValueError("{path}: ...")`` for a file that is not JSON or lacks a field.
+    """
+    try:
+        res = json.loads(path.read_text())
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{path}: not valid JSON ({err.msg} at line {err.lineno})") from None
+    evals = res.get("eval") if isinstance(res, dict) else None
+    ok = (isinstance(res, dict) and isinstance(res.get("config"), dict)
+          and "dynamics" in res["config"] and isinstance(res.get("timesteps"), int)
+          and isinstance(res.get("cpu_seconds"), (int, float)) and isinstance(evals, dict)
+          and all(isinstance(evals.get(k), dict)
+                  and all(f in evals[k] for f in ("success_rate", "mean_return", "n_episodes"))
+                  for k in ("mujoco", "fignet")))
+    if not ok:
+        raise ValueError(f"{path}: not a final evaluation (needs config.dynamics, timesteps, "
+                         "cpu_seconds and eval.mujoco / eval.fignet with success_rate, "
+                         "mean_return, n_episodes)")
+    return res
+
+
 def transfer_table(runs: Sequence[str | os.PathLike]) -> str:
     """Markdown table: each run (its training dynamics) x evaluated on MuJoCo / on FIGNet.
 
@@ -576,7 +601,7 @@ def transfer_table(runs: Sequence[str | os.PathLike]) -> str:
         path = Path(run) / "final_eval.json"
         if not path.exists():
             raise RunError(f"{path}: missing (the run has not finished)")
-        res = json.loads(path.read_text())
+        res = read_final_eval(path)
         m, f = res["eval"]["mujoco"], res["eval"]["fignet"]
         lines.append(
             f"| {res['config']['dynamics']} ({Path(run).name}) | {res['timesteps']:,} | "

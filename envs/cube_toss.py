@@ -338,6 +338,7 @@ class CubeTossEnv(MjDynamicsEnv):
                  "reward_yaw": -self.yaw_weight * abs(psi),
                  "reward_success": self.success_bonus * float(success)}
         info = {"distance": dist, "yaw_error_deg": math.degrees(psi), "success": success,
+                "is_success": success,  # the key run_episode and SB3's evaluate_policy read
                 "speed": float(np.linalg.norm(self.data.qvel[:3])),
                 "mujoco_source": self.mujoco_params["source"]}
         return terms, True, False, info

@@ -197,7 +197,7 @@ def test_rollout_steps_move_no_tensor_to_the_host(push_sim, monkeypatch) -> None
         with _no_host_transfers(monkeypatch):
             push_sim.rollout(scene.repeat(b), h, kin)
         syncs[b] = _HostGuard.syncs
-    assert syncs[1] == syncs[8] <= 5 * 5, syncs  # 5 per step measured
+    assert syncs[1] == syncs[8] <= 5 * 5, syncs  # per-step count: docs/experiments.md, Issue 17, "GPU path"
 
     dyn = FIGNetDynamics(push_sim)
     advance = dyn._advance

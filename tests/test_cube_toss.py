@@ -39,6 +39,7 @@ def test_check_env_and_seeded_episodes(dynamics: str) -> None:
         obs0, _ = env.reset(seed=seed)
         obs1, reward, terminated, truncated, info = env.step(np.array([0.3, -0.2, 0.1, 0.5, -0.5, 0.2]))
         assert terminated and not truncated
+        assert info["is_success"] is info["success"]  # the key run_episode / SB3 read
         assert reward == pytest.approx(sum(v for k, v in info.items() if k.startswith("reward_")))
         runs.append(np.concatenate([obs0, obs1]))
     np.testing.assert_array_equal(runs[0], runs[1])
@@ -147,7 +148,7 @@ def test_a_long_toss_accepts_a_checkpoint_dt_stored_to_nine_digits() -> None:
 def test_fitted_mujoco_and_cube_real_land_the_cube_close_together() -> None:
     # Two independent fits of the same real tosses (CMA-ES on MuJoCo's contact parameters, the
     # learned simulator): seeded random tosses of ~0.4 m should come to rest within a few cm of
-    # each other (measured: median 4.2 cm, worst 9.1 cm over 32; docs/experiments.md, Issue 14).
+    # each other (figures: docs/experiments.md, "Issue 14: FIGNet on real tosses").
     n = 16
     landed = {}
     for dyn in ("mujoco", "fignet"):

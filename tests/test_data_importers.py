@@ -164,7 +164,7 @@ def test_mit_bad_input_names_file_and_field(tmp_path: Path, capsys) -> None:
     parser = argparse.ArgumentParser()
     register(parser.add_subparsers(dest="cmd", required=True))
     args = parser.parse_args(["import-mit", str(tmp_path), "--out", str(out)])
-    assert args.func(args) == 1
+    assert args.func(args) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "Traceback" not in err and "field '" in err
     assert out.read_bytes() == before

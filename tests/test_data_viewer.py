@@ -88,4 +88,4 @@ def test_mesh_only_trajectory_and_cli_show(gl_ok: None, tmp_path: Path) -> None:
     assert args.func(args) == 0
     assert len(imageio.mimread(out)) == 3
     args = parser.parse_args(["show", str(path), "--traj", "4", "--out", str(out)])
-    assert args.func(args) == 1
+    assert args.func(args) == 2

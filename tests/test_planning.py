@@ -312,3 +312,67 @@ def test_plan_command_writes_summary_rows_and_videos(tmp_path: Any, capsys: Any)
     assert main(["plan", "--env", "fignet_gym/Nope-v0", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: --env: unknown environment")
+
+
+@pytest.mark.parametrize("planner", ["cem", "random"])
+def test_plan_command_refuses_an_env_without_a_planning_task(tmp_path: Any, capsys: Any,
+                                                             planner: str) -> None:
+    from fignet_gym.cli import main
+
+    out = tmp_path / "plan"
+    argv = ["plan", "--env", "fignet_gym/CubeToss-v0", "--planner", planner, "--episodes", "1",
+            "--out", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --env:") and "Push or Toss" in err[0]
+    assert not out.exists()
+
+
+def test_plan_command_checks_planner_settings_before_creating_out(tmp_path: Any,
+                                                                  capsys: Any) -> None:
+    from fignet_gym.cli import main
+
+    out = tmp_path / "plan"
+    assert main(["plan", "--env", "fignet_gym/Push-v1", "--horizon", "0", "--out", str(out)]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_plan_print_table_takes_rows_without_task_keys(capsys: Any) -> None:
+    from fignet_gym.tools.plan import print_table, summarize
+
+    rows = [{"seed": 0, "length": 3, "return": 1.5, "plan_seconds": 0.1, "plan_cpu_seconds": 0.1,
+             "diverged": False}]
+    print_table("random", rows, summarize(rows))
+    assert "mean return 1.50" in capsys.readouterr().out
+
+
+def test_plan_resume_drops_a_partial_last_line(tmp_path: Any) -> None:
+    import json
+
+    from fignet_gym.tools.plan import PlanError, read_rows
+
+    path = tmp_path / "episodes.jsonl"
+    path.write_text(json.dumps({"seed": 0}) + "\n" + '{"seed": 1, "ret')
+    assert read_rows(path) == [{"seed": 0}]
+    assert path.read_text() == json.dumps({"seed": 0}) + "\n"
+    path.write_text(json.dumps({"seed": 0}) + "\n" + json.dumps({"seed": 1}))  # cut before "\n"
+    assert read_rows(path) == [{"seed": 0}, {"seed": 1}]
+    assert path.read_text().endswith("}\n")
+    path.write_text('{"seed": 0\n' + json.dumps({"seed": 1}) + "\n")  # damage mid-file: refuse
+    with pytest.raises(PlanError, match="line 1"):
+        read_rows(path)
+
+
+@pytest.mark.parametrize(("planner_cls", "config"), [(CEMPlanner, TINY_CEM), (MPPIPlanner, TINY_MPPI)])
+def test_prediction_is_dropped_when_every_candidate_diverges(planner_cls: type, config: Any) -> None:
+    from dataclasses import replace
+
+    env = gym.make("fignet_gym/Push-v1")
+    env.reset(seed=0)
+    planner = planner_cls(MujocoDynamics(), replace(config, replan_every=1), env=env)
+    planner.plan(env)
+    assert planner.prediction is not None
+    planner.costs = lambda state, actions: (np.full(len(actions), np.inf), None)
+    planner.plan(env)
+    assert planner.prediction is None

@@ -202,3 +202,15 @@ def test_killed_process_resumes(tmp_path: Path) -> None:
     rows = steps(out / "progress.csv")
     assert rows == list(range(32, 4096 + 1, 32))
     assert json.loads((out / "final_eval.json").read_text())["timesteps"] == 4096
+
+
+@pytest.mark.parametrize("content", ["{}", "[1]", '{"config": {"dynamics": "mujoco"}, "eval": {}}',
+                                     '{"config": {"dyn'])
+def test_ppo_table_names_a_wrong_final_eval(tmp_path: Path, capsys: pytest.CaptureFixture,
+                                            content: str) -> None:
+    from fignet_gym.cli import main
+
+    (tmp_path / "final_eval.json").write_text(content)
+    assert main(["ppo-table", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {tmp_path / 'final_eval.json'}: ")

@@ -286,6 +286,14 @@ def test_a_pickle_payload_is_refused_without_torchs_unsafe_hint(tmp_path: Path) 
     assert "could run code" in str(info.value)
 
 
+def test_a_corrupt_pickle_is_unreadable_not_code(tmp_path: Path) -> None:
+    (tmp_path / "junk.pt").write_bytes(b"\x80\x02garbage" * 10)  # a pickle header, then junk
+    with pytest.raises(CheckpointError) as info:
+        LearnedSimulator.load(tmp_path / "junk.pt")
+    assert "junk.pt: not a readable checkpoint" in str(info.value)
+    assert "could run code" not in str(info.value)
+
+
 # ----------------------------------------------------------------------------- 4 resume after SIGKILL
 _KILLED_RUN = """
 import os, signal, sys, json

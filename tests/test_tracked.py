@@ -160,7 +160,7 @@ def test_contactnets_import_errors(tmp_path: Path) -> None:
     with pytest.raises(DataImportError, match=r"0\.pt.*quaternion norm 0"):
         list(read_contactnets(tmp_path))
     torch.save(torch.zeros(1, 10, 13), tmp_path / "tosses_processed" / "0.pt")
-    assert _cli("import-contactnets", str(tmp_path), "--out", str(tmp_path / "x.h5")) == 1
+    assert _cli("import-contactnets", str(tmp_path), "--out", str(tmp_path / "x.h5")) == 2
     (tmp_path / "tosses_processed" / "0.pt").write_bytes(b"not a tensor")
     with pytest.raises(DataImportError, match=r"0\.pt: not a readable torch tensor"):
         import_contactnets(tmp_path, tmp_path / "x.h5")
@@ -189,7 +189,7 @@ def test_split_with_too_few_trajectories_is_a_clear_error(tmp_path: Path) -> Non
         split_indices(2, where="my.h5")
     trajs = [tracked_trajectory(_cube_xml(), {"cube": _track()}, 0.01, name=f"t{i}") for i in range(2)]
     write_trajectories(tmp_path / "two.h5", trajs)
-    assert _cli("split", str(tmp_path / "two.h5"), "--out", str(tmp_path / "s")) == 1
+    assert _cli("split", str(tmp_path / "two.h5"), "--out", str(tmp_path / "s")) == 2
 
 
 def test_write_split_files_hold_the_split(tmp_path: Path) -> None:
@@ -201,3 +201,33 @@ def test_write_split_files_hold_the_split(tmp_path: Path) -> None:
     for s in ("train", "valid", "test"):
         assert [t.name for t in load_trajectories(paths[s])] == [f"t{i}" for i in getattr(split, s)]
         assert info[s] == list(getattr(split, s))
+
+
+def test_split_refuses_an_existing_split_without_force(tmp_path: Path, capsys) -> None:
+    trajs = [tracked_trajectory(_cube_xml(), {"cube": _track()}, 0.01, name=f"t{i}") for i in range(10)]
+    write_trajectories(tmp_path / "ten.h5", trajs)
+    out = tmp_path / "s"
+    assert _cli("split", str(tmp_path / "ten.h5"), "--out", str(out), "--seed", "1") == 0
+    before = json.loads((out / "split.json").read_text())
+    capsys.readouterr()
+    assert _cli("split", str(tmp_path / "ten.h5"), "--out", str(out), "--seed", "2") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(out) in err[0] and "--force" in err[0]
+    assert json.loads((out / "split.json").read_text()) == before
+    assert _cli("split", str(tmp_path / "ten.h5"), "--out", str(out), "--seed", "2", "--force") == 0
+    after = json.loads((out / "split.json").read_text())
+    assert after["train"] == list(split_indices(10, seed=2).train) != before["train"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s", "ten.h5"]  # no temp folder left
+
+
+def test_mit_standin_and_contactnets_refuse_bad_numbers(tmp_path: Path) -> None:
+    bad = [("mit-standin", "--num", "-1"), ("mit-standin", "--num", "0"),
+           ("mit-standin", "--noise", "nan"), ("mit-standin", "--seed", "-1"),
+           ("mit-standin", "--penetration", "-0.001"),
+           ("import-contactnets", str(tmp_path), "--length-unit", "0"),
+           ("import-contactnets", str(tmp_path), "--floor-half-size", "-2")]
+    for cmd, *argv in bad:
+        with pytest.raises(SystemExit) as exc:
+            _cli(cmd, "--out", str(tmp_path / "o"), *argv)
+        assert exc.value.code == 2, (cmd, argv)
+    assert not (tmp_path / "o").exists()

@@ -64,7 +64,7 @@ def _guarded(fn: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Name
             return fn(args)
         except _KNOWN_ERRORS as err:  # DataImportError and GenerationError are among these
             print(f"error: {err}", file=sys.stderr)
-            return 1
+            return 2  # as cli.run_command: the one exit code for a user error
     run.__doc__ = fn.__doc__
     return run
 
@@ -161,7 +161,7 @@ def _import_contactnets(args: argparse.Namespace) -> int:
 def _split(args: argparse.Namespace) -> int:
     from fignet_gym.data.split import write_split
 
-    paths = write_split(args.data, args.out, args.fractions, args.seed)
+    paths = write_split(args.data, args.out, args.fractions, args.seed, force=args.force)
     print(f"wrote {', '.join(str(p) for p in paths.values())}")
     return 0
 
@@ -247,19 +247,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("directory", help="folder with params_processed/experiment.json and "
                    "tosses_processed/*.pt")
     c.add_argument("--out", required=True)
-    c.add_argument("--length-unit", type=float, default=None,
+    c.add_argument("--length-unit", type=positive_float, default=None,
                    help="metres per data unit (default: 9.81 / the file's g, the half-width)")
-    c.add_argument("--floor-half-size", type=float, default=2.0, help="floor plane half-size (m)")
+    c.add_argument("--floor-half-size", type=positive_float, default=2.0, help="floor plane half-size (m)")
     c.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
     c.set_defaults(func=_guarded(_import_contactnets))
 
     ms = subparsers.add_parser("mit-standin", help="stand-in MIT Pushing raw files (MuJoCo pushes "
                                "with per-push friction, tracking noise and pusher penetration)")
     ms.add_argument("--out", required=True, help="folder for the raw .json pushes")
-    ms.add_argument("--num", type=int, default=120)
-    ms.add_argument("--seed", type=int, default=0)
-    ms.add_argument("--noise", type=float, default=5e-4, help="object tracking noise (m)")
-    ms.add_argument("--penetration", type=float, default=1e-3,
+    ms.add_argument("--num", type=int_at_least(1), default=120)
+    ms.add_argument("--seed", type=int_at_least(0), default=0)
+    ms.add_argument("--noise", type=nonnegative_float, default=5e-4, help="object tracking noise (m)")
+    ms.add_argument("--penetration", type=nonnegative_float, default=1e-3,
                     help="how much thinner the simulated tip is than the imported scene's (m)")
     ms.set_defaults(func=_guarded(_mit_standin))
 
@@ -269,6 +269,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sp.add_argument("--fractions", type=float, nargs=3, default=[0.6, 0.2, 0.2],
                     metavar=("TRAIN", "VALID", "TEST"))
     sp.add_argument("--seed", type=int, default=0)
+    sp.add_argument("--force", action="store_true", help="replace a split already in OUT")
     sp.set_defaults(func=_guarded(_split))
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -84,27 +85,48 @@ def split_indices(n: int, fractions: Sequence[float] = DEFAULT_FRACTIONS, seed: 
 
 def write_split(data: str | os.PathLike, out: str | os.PathLike,
                 fractions: Sequence[float] = DEFAULT_FRACTIONS, seed: int = 0,
-                min_sizes: Sequence[int] = (1, 1, 1)) -> dict[str, Path]:
+                min_sizes: Sequence[int] = (1, 1, 1), force: bool = False) -> dict[str, Path]:
     """Write ``out/{train,valid,test}.h5`` and ``out/split.json`` from one trajectory file.
 
     Returns the paths by split name (plus ``"json"``). The files are in split order (training
     file: the seeded order, so ``train --max-train k`` takes :meth:`Split.subset` ``(k)``).
+    ``FileExistsError`` if ``out`` already holds a split and ``force`` is not set. The files are
+    written into a temporary sibling folder first, so a killed run leaves no partial split.
     """
     from fignet_gym.data.format import TrajectoryFile, TrajectoryWriter
 
     out = Path(out)
+    files = [f"{s}.h5" for s in SPLITS] + ["split.json"]
+    existing = [name for name in files if (out / name).exists()]
+    if existing and not force:
+        raise FileExistsError(f"{out}: already holds a split ({', '.join(existing)}); "
+                              "pass --force to replace it")
+    tmp = out.with_name(f".{out.name}.tmp")
     with TrajectoryFile(data) as f:
         split = split_indices(len(f), fractions, seed, min_sizes, where=str(data))
         names = f.names
-        paths: dict[str, Path] = {}
-        for s in SPLITS:
-            paths[s] = out / f"{s}.h5"
-            with TrajectoryWriter(paths[s], {**f.metadata, "split": s, "split_seed": seed,
-                                             "split_of": str(data)}) as w:
-                for i in getattr(split, s):
-                    w.add(f[i])
-    info = {"data": str(data), **split.to_json(),
-            "names": {s: [names[i] for i in getattr(split, s)] for s in SPLITS}}
+        if tmp.exists():  # left by a killed run
+            shutil.rmtree(tmp)
+        tmp.mkdir(parents=True)
+        try:
+            for s in SPLITS:
+                with TrajectoryWriter(tmp / f"{s}.h5", {**f.metadata, "split": s,
+                                                        "split_seed": seed,
+                                                        "split_of": str(data)}) as w:
+                    for i in getattr(split, s):
+                        w.add(f[i])
+            info = {"data": str(data), **split.to_json(),
+                    "names": {s: [names[i] for i in getattr(split, s)] for s in SPLITS}}
+            (tmp / "split.json").write_text(json.dumps(info, indent=1))
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+    if not out.exists():
+        os.rename(tmp, out)
+    else:  # an existing folder (maybe holding other files): move the files, split.json last
+        for name in files:
+            os.replace(tmp / name, out / name)
+        tmp.rmdir()
+    paths = {s: out / f"{s}.h5" for s in SPLITS}
     paths["json"] = out / "split.json"
-    paths["json"].write_text(json.dumps(info, indent=1))
     return paths

@@ -139,11 +139,17 @@ def _unpickle(path: Path, map_location: str | torch.device) -> Any:
     try:
         return torch.load(path, map_location=map_location, weights_only=True)
     except pickle.UnpicklingError as exc:
-        first = str(exc).strip().splitlines()
-        what = next((ln.strip() for ln in first if "Unsupported global" in ln or "GLOBAL" in ln), "")
-        raise CheckpointError(
-            f"{path}: holds Python objects other than tensors and plain values, refused because "
-            f"unpickling them could run code{f' ({what})' if what else ''}") from None
+        lines = str(exc).strip().splitlines()
+        # torch's message always mentions weights_only; only a refused GLOBAL means objects
+        what = next((ln.strip() for ln in lines if "Unsupported global" in ln or "GLOBAL" in ln), "")
+        if what:
+            raise CheckpointError(
+                f"{path}: holds Python objects other than tensors and plain values, refused "
+                f"because unpickling them could run code ({what})") from None
+        cause = next((ln.strip() for ln in lines if ln.strip().startswith("Unsupported")),
+                     lines[0] if lines else type(exc).__name__)
+        raise CheckpointError(f"{path}: not a readable checkpoint (truncated, corrupt or not "
+                              f"written by torch.save: {cause})") from None
     except (RuntimeError, EOFError, OSError, ValueError, KeyError, AttributeError, TypeError,
             IndexError, UnicodeDecodeError, MemoryError) as exc:
         first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]

@@ -33,8 +33,8 @@ from torch import Tensor, nn
 from fignet_gym.simulator.graph import Graph
 
 #: Fewest rows a matmul is given (padded with zeros): BLAS uses another kernel for 1 to 3 rows,
-#: whose rounding differs from the same rows inside a larger product (measured with torch 2.13 on
-#: CPU), which would make a scene's result depend on its batch.
+#: whose rounding differs from the same rows inside a larger product (docs/experiments.md, Issue 17,
+#: "Batched equals single"), which would make a scene's result depend on its batch.
 MIN_ROWS = 4
 
 

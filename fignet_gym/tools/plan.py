@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from fignet_gym.atomic import write_text
+
 BASELINES = ("idle", "random")
 
 
@@ -47,6 +49,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--iterations", type=int, help="override the preset iterations")
     p.add_argument("--replan-every", type=int, help="override the preset re-planning period")
     p.add_argument("--threads", type=int, default=1, help="torch and MuJoCo rollout threads")
+
+
+def read_rows(path: Path) -> list[dict[str, Any]]:
+    """The episode rows of ``episodes.jsonl``, dropping a partial last line (a run killed mid-append).
+
+    The file is rewritten without that line so the next append starts on a fresh line.
+    """
+    text = path.read_text()
+    lines = text.splitlines()
+    rows: list[dict[str, Any]] = []
+    for i, line in enumerate(lines):
+        if not line.strip():
+            continue
+        try:
+            rows.append(json.loads(line))
+        except json.JSONDecodeError:
+            if i == len(lines) - 1 and not text.endswith("\n"):
+                break
+            raise PlanError(f"{path}: line {i + 1} is not JSON") from None
+    if text and not text.endswith("\n"):  # cut mid-append, maybe just before its newline
+        write_text(path, "".join(json.dumps(r) + "\n" for r in rows))
+    return rows
 
 
 def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -78,8 +102,10 @@ def print_table(label: str, rows: list[dict[str, Any]], summary: dict[str, Any])
         if push:
             body = (f"{str(r['is_success']):>7s}  {r['position_error'] * 1000:13.1f}  "
                     f"{r['orientation_error']:17.3f}")
-        else:
+        elif "num_in_target" in r:
             body = f"{r['num_in_target']:9d}"
+        else:
+            body = f"{'-':>9s}"
         print(f"{r['seed']:6d}  {r['length']:5d}  {body}  {r['plan_cpu_seconds']:14.3f}")
     spa = summary.get("seconds_per_action", {})
     if push:
@@ -87,17 +113,22 @@ def print_table(label: str, rows: list[dict[str, Any]], summary: dict[str, Any])
               f"{summary['median_position_error'] * 1000:.1f} mm / "
               f"{summary['median_orientation_error']:.3f} rad, "
               f"{spa.get('cpu', 0):.3f} CPU-s ({spa.get('wall', 0):.3f} s wall) per action")
-    else:
+    elif "mean_in_target" in summary:
         print(f"mean objects in target {summary['mean_in_target']:.2f} over {summary['episodes']}"
               f" episodes, {spa.get('cpu', 0):.3f} CPU-s per action")
+    else:
+        print(f"{summary['episodes']} episodes, mean return {summary.get('mean_return', 0):.2f}, "
+              f"{spa.get('cpu', 0):.3f} CPU-s per action")
 
 
 class SideBySide:
     """Frames of an episode (left) beside the planning model's prediction (right)."""
 
-    def __init__(self, env_id: str, env_kwargs: dict[str, Any], width: int = 320) -> None:
+    def __init__(self, env_id: str, env_kwargs: dict[str, Any], width: int = 320,
+                 acting: str = "mujoco") -> None:
         import gymnasium as gym
 
+        self.acting = {"mujoco": "MuJoCo", "fignet": "FIGNet"}.get(acting, acting)
         self.imagined = gym.make(env_id, render_mode="rgb_array", width=width, height=width,
                                  **env_kwargs).unwrapped
         self.imagined.reset(seed=0)
@@ -113,7 +144,7 @@ class SideBySide:
                 setattr(self.imagined, attr, np.copy(getattr(u, attr)))
         self.imagined.set_state(pred[-1] if pred is not None else u.get_state())
         right = self.imagined.render()
-        self.frames.append(np.concatenate([_label(left, "acting (MuJoCo)"),
+        self.frames.append(np.concatenate([_label(left, f"acting ({self.acting})"),
                                            _label(right, "planner's prediction")], axis=1))
 
     def write(self, path: Path, fps: int) -> None:
@@ -143,6 +174,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     import fignet_gym.envs  # noqa: F401  (registers the environments)
     from fignet_gym.agents import IdleAgent, RandomAgent, make_planner, run_episode
     from fignet_gym.dynamics import MujocoDynamics, make_dynamics
+    from fignet_gym.envs.push import PushEnv
+    from fignet_gym.envs.toss import TossEnv
 
     torch.set_num_threads(max(1, args.threads))
     if args.episodes < 1:
@@ -151,10 +184,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         ids = sorted(k for k in gym.registry if k.startswith("fignet_gym/"))
         raise PlanError(f"--env: unknown environment {args.env!r}; use one of {ids}")
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     env_kwargs = {"dynamics": args.act_dynamics}
     render = {"render_mode": "rgb_array", "width": 320, "height": 320} if args.videos else {}
     env = gym.make(args.env, **render, **env_kwargs)
+    if not isinstance(env.unwrapped, (PushEnv, TossEnv)):
+        raise PlanError(f"--env: {args.env} is not a Push or Toss environment (plan has no task "
+                        f"for {type(env.unwrapped).__name__})")
     scene = env.unwrapped.scene_type
     if args.planner in BASELINES:
         agent: Any = (IdleAgent if args.planner == "idle" else RandomAgent)(seed=args.seed)
@@ -175,10 +210,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         except ValueError as err:  # a checkpoint of another scene, a bad budget
             raise PlanError(str(err)) from None
         label = f"{args.planner.upper()} planning on {args.dynamics}, acting in {args.act_dynamics}"
+    out.mkdir(parents=True, exist_ok=True)
     rows_path = out / "episodes.jsonl"
     rows: list[dict[str, Any]] = []
     if args.resume and rows_path.exists():
-        rows = [json.loads(line) for line in rows_path.read_text().splitlines() if line.strip()]
+        rows = read_rows(rows_path)
     elif rows_path.exists():
         rows_path.unlink()
     done = {r["seed"] for r in rows}
@@ -190,7 +226,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     todo = [args.seed + k for k in range(args.episodes) if args.seed + k not in done]
     for seed in tqdm(todo, desc=label, unit="episode"):
         k = seed - args.seed
-        video = SideBySide(args.env, env_kwargs) if k < args.videos else None
+        video = SideBySide(args.env, env_kwargs, acting=args.act_dynamics) if k < args.videos else None
         t0 = time.perf_counter()
         row = {"seed": seed, **run_episode(env, agent, seed=seed, on_step=video)}
         row["seconds"] = time.perf_counter() - t0
@@ -200,10 +236,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         if video is not None:
             video.write(out / f"episode_{seed}.mp4", env.metadata["render_fps"])
         summary = {**meta, **summarize(rows), "rows": sorted(rows, key=lambda r: r["seed"])}
-        (out / "summary.json").write_text(json.dumps(summary, indent=2))
+        write_text(out / "summary.json", json.dumps(summary, indent=2))
     rows.sort(key=lambda r: r["seed"])
     summary = {**meta, **summarize(rows), "rows": rows}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    write_text(out / "summary.json", json.dumps(summary, indent=2))
     print_table(label, rows, summary)
     print(f"wrote {out / 'summary.json'}")
     return summary

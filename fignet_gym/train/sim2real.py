@@ -31,6 +31,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from fignet_gym.atomic import write_text
 from fignet_gym.data.split import DEFAULT_FRACTIONS, write_split
 
 TrainFn = Callable[[Path, Path, "int | None", Path], Path]
@@ -64,7 +65,7 @@ def _train_from(init: str, train_file: Path, valid_file: Path, size: int | None,
                 config: str, budget: int | None, overrides: dict[str, Any] | None) -> Path:
     """Fine-tune ``init`` on the first ``size`` training trajectories (resumable)."""
     from fignet_gym.data.format import load_trajectories
-    from fignet_gym.train.real import default_steps
+    from fignet_gym.train.real import TrainingInterrupted, default_steps
     from fignet_gym.train.training import Trainer, load_run_config
 
     trajs = load_trajectories(train_file)
@@ -82,7 +83,10 @@ def _train_from(init: str, train_file: Path, valid_file: Path, size: int | None,
     trainer = Trainer(sim_cfg, cfg, trajs, load_trajectories(valid_file), out_dir, resume=resume,
                       init=None if resume else init)
     state = trainer.run()
-    if state.step >= cfg.steps and best.is_file():
+    if state.step < cfg.steps:  # SIGINT / SIGTERM: last.pt is written, a new call resumes
+        raise TrainingInterrupted(f"{out_dir}: training interrupted at step {state.step} of "
+                                  f"{cfg.steps}; call again to resume")
+    if best.is_file():
         done.write_text(json.dumps({"step": state.step, "cpu_hours": state.cpu_seconds / 3600}))
     return best
 
@@ -92,9 +96,7 @@ def _read(path: Path) -> dict[str, Any] | None:
 
 
 def _write(path: Path, obj: dict[str, Any]) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(obj, indent=1, default=float))
-    os.replace(tmp, path)
+    write_text(path, json.dumps(obj, indent=1, default=float))
 
 
 def _size_label(size: int | None) -> str:
@@ -161,7 +163,7 @@ def run_sim2real(
 
     split_dir = out / "split"
     if not (split_dir / "split.json").is_file():
-        write_split(data, split_dir, fractions, seed)
+        write_split(data, split_dir, fractions, seed, force=True)  # no split.json: unfinished
     split = json.loads((split_dir / "split.json").read_text())
     n_train = len(split["train"])
     for s in sizes if fignet else ():
