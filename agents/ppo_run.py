@@ -32,6 +32,7 @@ most ``num_envs`` partial episodes).
 from __future__ import annotations
 
 import csv
+import io
 import json
 import os
 import pickle
@@ -204,12 +205,11 @@ class CSVRows(KVWriter):
 
     def _flush(self) -> None:
         columns = list(dict.fromkeys(k for r in self.rows for k in r)) or ["step"]
-        tmp = self.path.with_suffix(".tmp")
-        with tmp.open("w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=columns)
-            writer.writeheader()
-            writer.writerows(self.rows)
-        tmp.replace(self.path)
+        buf = io.StringIO(newline="")
+        writer = csv.DictWriter(buf, fieldnames=columns)
+        writer.writeheader()
+        writer.writerows(self.rows)
+        write_text(self.path, buf.getvalue())
 
     def close(self) -> None:
         pass

@@ -274,13 +274,14 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--fractions", type=float, nargs=3, default=[0.6, 0.2, 0.2],
                    metavar=("TRAIN", "VALID", "TEST"))
     r.add_argument("--seed", type=int, default=0, help="split, fit and training seed")
-    r.add_argument("--horizon", type=int, default=50, help="frame of the headline errors (from 0)")
-    r.add_argument("--fit-evaluations", type=int, default=240,
+    r.add_argument("--horizon", type=int_at_least(1), default=50,
+                   help="frame of the headline errors (from 0)")
+    r.add_argument("--fit-evaluations", type=int_at_least(1), default=240,
                    help="CMA-ES candidates per friction cone")
-    r.add_argument("--fit-trajectories", type=int, default=64,
+    r.add_argument("--fit-trajectories", type=int_at_least(1), default=64,
                    help="training trajectories each candidate replays")
     r.add_argument("--config", default="cube-real", help="FIGNet training preset or JSON")
-    r.add_argument("--budget", type=int, default=None,
+    r.add_argument("--budget", type=int_at_least(1), default=None,
                    help="optimiser steps per FIGNet run (default: the recipe's, by size)")
     r.add_argument("--init", default=None, help="warm-start FIGNet from a checkpoint or pretrained name")
     r.add_argument("--set", help='JSON overrides of the training config, e.g. \'{"training.lr": 5e-4}\'')

@@ -25,6 +25,7 @@ from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Any
 
+from fignet_gym.atomic import write_text
 from fignet_gym.simulator.checkpoint import CheckpointWarning, read_checkpoint
 from fignet_gym.simulator.model import SimulatorConfig
 
@@ -118,9 +119,7 @@ def rewind(out: Path, step: int) -> None:
                 continue  # a line cut by the kill
             if isinstance(rec, dict) and rec.get("step", step + 1) <= step:
                 kept.append(json.dumps(rec))
-        tmp = curve.with_name(curve.name + ".tmp")
-        tmp.write_text("".join(k + "\n" for k in kept))
-        tmp.replace(curve)
+        write_text(curve, "".join(k + "\n" for k in kept))
     pending = out / PENDING_BEST
     if pending.is_file():
         try:
