@@ -13,6 +13,7 @@ import json
 import math
 import os
 from collections.abc import Sequence
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -23,9 +24,14 @@ from fignet_gym.data.format import Trajectory, build_scene, load_trajectories
 
 #: Optimiser steps of ``cube-real`` by training-set size (the last entry for anything larger):
 #: a few tosses are learned (and overfitted) sooner, so small sets get fewer steps. Selection on
-#: validation picks the best checkpoint within them (see docs/experiments.md, Issue 14).
-DEFAULT_STEPS: tuple[tuple[int, int], ...] = ((8, 1200), (16, 1500), (32, 2000), (64, 3000),
-                                              (128, 4000), (10**9, 5000))
+#: validation picks the best checkpoint within them. Sized so that a whole ``sim2real`` sweep
+#: (8 .. all of 240 tosses, with validations and MuJoCo's fit) stays within 2 CPU hours on one
+#: core (docs/experiments.md, Issue 14, "Sweep budget").
+DEFAULT_STEPS: tuple[tuple[int, int], ...] = ((8, 3000), (16, 4000), (32, 5000), (64, 8000),
+                                              (128, 12000), (10**9, 20000))
+#: Pushforward starts after this fraction of a run's steps (the ``cube-real`` preset's 5000 of
+#: 40000): validation error kept falling only once it had started.
+UNROLL_AFTER_FRACTION = 0.125
 
 
 class TrainingInterrupted(RuntimeError):
@@ -109,6 +115,7 @@ def train_on_split(
     The gravity prior is measured on the training subset (:func:`free_flight_gravity`) unless
     ``overrides`` sets ``simulator.gravity``. Returns ``out_dir / "best.pt"``.
     """
+    from fignet_gym.train.rundir import check_resume_config
     from fignet_gym.train.training import Trainer, load_run_config
 
     trajs = _trajectories(train, "train")
@@ -120,13 +127,12 @@ def train_on_split(
     out = Path(out_dir)
     best = out / "best.pt"
     done = out / "done.json"
-    if done.is_file() and best.is_file():
-        return best
     sets: dict[str, Any] = dict(overrides or {})
     sets.setdefault("training.seed", seed)
     sets.setdefault("training.threads", 1)
     steps = int(budget) if budget is not None else default_steps(len(trajs))
     sets.setdefault("training.steps", steps)
+    sets.setdefault("training.unroll_after", int(steps * UNROLL_AFTER_FRACTION))
     # Validate ~12 times per run whatever its length: early stopping needs points to choose
     # from, and a validation (80 full-length rollouts plus one-step errors) costs about as much
     # CPU as 500 training steps.
@@ -134,6 +140,11 @@ def train_on_split(
     if "simulator.gravity" not in sets:
         sets["simulator.gravity"] = (0.0, 0.0, free_flight_gravity(trajs))
     sim_cfg, cfg = load_run_config(config, sets)
+    # A run left in ``out`` (finished or not) is only reused when it is the run asked for: a
+    # changed budget or recipe must not return stale results.
+    check_resume_config(out, sim_cfg, asdict(cfg))
+    if done.is_file() and best.is_file():
+        return best
     out.mkdir(parents=True, exist_ok=True)
     (out / "split.json").write_text(json.dumps(
         {"train": [t.name for t in trajs], "valid": [t.name for t in valid_trajs],

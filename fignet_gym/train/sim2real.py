@@ -28,6 +28,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -65,19 +66,22 @@ def _train_from(init: str, train_file: Path, valid_file: Path, size: int | None,
                 config: str, budget: int | None, overrides: dict[str, Any] | None) -> Path:
     """Fine-tune ``init`` on the first ``size`` training trajectories (resumable)."""
     from fignet_gym.data.format import load_trajectories
-    from fignet_gym.train.real import TrainingInterrupted, default_steps
+    from fignet_gym.train.real import UNROLL_AFTER_FRACTION, TrainingInterrupted, default_steps
+    from fignet_gym.train.rundir import check_resume_config
     from fignet_gym.train.training import Trainer, load_run_config
 
     trajs = load_trajectories(train_file)
     trajs = trajs[:size] if size is not None else trajs
     best, done = out_dir / "best.pt", out_dir / "done.json"
-    if done.is_file() and best.is_file():
-        return best
     sets = {"training.threads": 1, **(overrides or {})}
     steps = int(budget or default_steps(len(trajs)))
     sets.setdefault("training.steps", steps)
+    sets.setdefault("training.unroll_after", int(steps * UNROLL_AFTER_FRACTION))
     sets.setdefault("training.valid_every", max(25, steps // 12))
     sim_cfg, cfg = load_run_config(config, sets)
+    check_resume_config(out_dir, sim_cfg, asdict(cfg))  # reuse only the run asked for
+    if done.is_file() and best.is_file():
+        return best
     out_dir.mkdir(parents=True, exist_ok=True)
     resume = (out_dir / "last.pt").is_file()
     trainer = Trainer(sim_cfg, cfg, trajs, load_trajectories(valid_file), out_dir, resume=resume,
