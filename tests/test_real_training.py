@@ -22,6 +22,7 @@ from fignet_gym.train.real import (
     free_flight_gravity,
     train_on_split,
 )
+from fignet_gym.train.rundir import RunFolderError
 from fignet_gym.train.training import Trainer, load_run_config
 
 TINY = {"simulator.latent_size": 8, "simulator.message_passing_steps": 1,
@@ -95,6 +96,9 @@ def test_train_on_split_subsets_measures_gravity_and_resumes(tmp_path: Path,
     stamp = (out / "last.pt").stat().st_mtime_ns
     assert train_on_split(train_file, trajs[3:], 2, out, budget=4, overrides=TINY) == best
     assert (out / "last.pt").stat().st_mtime_ns == stamp
+    # ... but only when it is the run asked for: another budget is refused, not answered stale.
+    with pytest.raises(RunFolderError, match="finished run of 4 steps, asked for 6"):
+        train_on_split(train_file, trajs[3:], 2, out, budget=6, overrides=TINY)
     with pytest.raises(ValueError, match="subset of 9"):
         train_on_split(train_file, trajs[3:], 9, tmp_path / "x", budget=4, overrides=TINY)
 

@@ -46,6 +46,21 @@ def default_steps(size: int) -> int:
     return DEFAULT_STEPS[-1][1]
 
 
+def finished_run(done: Path, best: Path, steps: int) -> Path:
+    """``best`` of a finished run (``done`` its record), if it ran the ``steps`` asked for.
+
+    Raises :class:`~fignet_gym.train.rundir.RunFolderError` otherwise: a budget changed between
+    calls must not be answered with the old run's results.
+    """
+    from fignet_gym.train.rundir import RunFolderError
+
+    ran = json.loads(done.read_text()).get("step")
+    if ran != steps:
+        raise RunFolderError(f"{done.parent}: holds a finished run of {ran} steps, asked for "
+                             f"{steps}: use another run folder")
+    return best
+
+
 def free_flight_gravity(trajs: Sequence[Trajectory], clearance: float = 0.01, min_poses: int = 8
                         ) -> float:
     """Vertical acceleration (m/s^2, negative: down) of free flight, measured from poses.
@@ -144,7 +159,7 @@ def train_on_split(
     # changed budget or recipe must not return stale results.
     check_resume_config(out, sim_cfg, asdict(cfg))
     if done.is_file() and best.is_file():
-        return best
+        return finished_run(done, best, cfg.steps)
     out.mkdir(parents=True, exist_ok=True)
     (out / "split.json").write_text(json.dumps(
         {"train": [t.name for t in trajs], "valid": [t.name for t in valid_trajs],

@@ -66,7 +66,12 @@ def _train_from(init: str, train_file: Path, valid_file: Path, size: int | None,
                 config: str, budget: int | None, overrides: dict[str, Any] | None) -> Path:
     """Fine-tune ``init`` on the first ``size`` training trajectories (resumable)."""
     from fignet_gym.data.format import load_trajectories
-    from fignet_gym.train.real import UNROLL_AFTER_FRACTION, TrainingInterrupted, default_steps
+    from fignet_gym.train.real import (
+        UNROLL_AFTER_FRACTION,
+        TrainingInterrupted,
+        default_steps,
+        finished_run,
+    )
     from fignet_gym.train.rundir import check_resume_config
     from fignet_gym.train.training import Trainer, load_run_config
 
@@ -81,7 +86,7 @@ def _train_from(init: str, train_file: Path, valid_file: Path, size: int | None,
     sim_cfg, cfg = load_run_config(config, sets)
     check_resume_config(out_dir, sim_cfg, asdict(cfg))  # reuse only the run asked for
     if done.is_file() and best.is_file():
-        return best
+        return finished_run(done, best, cfg.steps)
     out_dir.mkdir(parents=True, exist_ok=True)
     resume = (out_dir / "last.pt").is_file()
     trainer = Trainer(sim_cfg, cfg, trajs, load_trajectories(valid_file), out_dir, resume=resume,
