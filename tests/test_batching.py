@@ -251,3 +251,24 @@ def test_bfloat16_mode_runs_a_mixed_batch(push_sim) -> None:  # noqa: ANN001
     assert torch.isfinite(out).all()
     moved = (ref[:, :3] - hist[-1][:, :3]).norm(dim=-1).max()
     assert (out[:, :3] - ref[:, :3]).norm(dim=-1).max() <= 0.1 * moved + 1e-6
+
+
+def test_in_place_residuals_change_nothing_and_keep_gradients(push_sim) -> None:  # noqa: ANN001
+    """Inference writes each block's residual sums into the dead latents: the network's output
+    must equal the autograd path's (new tensors) bit for bit, its input graph must be untouched,
+    and training (grad enabled) must still backpropagate through every block."""
+    model = mujoco.MjModel.from_xml_string(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
+    scene = Scene.from_mjmodel(model, push_sim.config.mesh_options)
+    hist = torch.cat((_push_history(scene, 0.0), _push_history(scene, 0.5)), dim=1)
+    graph = push_sim.normalize(push_sim.build_inputs(scene.repeat(2), hist, hist[-1]).graph)
+    before = graph.node_features.clone()
+    with torch.no_grad():
+        fast = push_sim.net(graph)
+    assert torch.equal(graph.node_features, before)
+    with torch.enable_grad():
+        slow = push_sim.net(graph)
+        slow.square().sum().backward()
+    assert torch.equal(fast, slow.detach())
+    first = push_sim.net.blocks[0].mesh_node.first.weight
+    assert first.grad is not None and bool(first.grad.abs().sum() > 0)
+    push_sim.zero_grad(set_to_none=True)

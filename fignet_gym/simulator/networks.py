@@ -273,6 +273,18 @@ class Topology:
         )
 
 
+def _residual(x: Tensor, update: Tensor) -> Tensor:
+    """``x + update`` (same shape); in place on ``x`` when no graph is recorded.
+
+    Each block's old latents are dead once its new ones exist, and writing the sum into them
+    saves allocating (and faulting in) a fresh buffer the size of every edge set per block.
+    Under autograd the old latent is an input that backward still reads, so a new tensor is made.
+    """
+    if torch.is_grad_enabled() or x.dtype != update.dtype:
+        return x + update
+    return x.add_(update)
+
+
 def _sum_into(n: int, receivers: Tensor, messages: Tensor) -> Tensor:
     """Sum ``messages float[M, L]`` per receiver: ``float[n, L]`` in the messages' dtype."""
     return messages.new_zeros(n, messages.shape[1]).index_add_(0, receivers, messages)
@@ -342,12 +354,12 @@ class ProcessorBlock(nn.Module):
         if self.use_mesh:
             m = self.mesh_edge.forward_pre(edge_first_layer(self.mesh_edge.first, e["mesh"], v, t.mesh))
             if not final:
-                new_e["mesh"] = e["mesh"] + m
+                new_e["mesh"] = _residual(e["mesh"], m)
             agg.append(_sum_into(n, t.mesh_receivers, m))
         if self.use_world:
             m = self.world_edge.forward_pre(edge_first_layer(self.world_edge.first, e["world"], v, t.world))
             if not final:
-                new_e["world"] = e["world"] + m
+                new_e["world"] = _residual(e["world"], m)
             agg.append(_sum_into(n, t.world_receivers, m))
         o_new = o
         if self.use_obj:
@@ -357,8 +369,8 @@ class ProcessorBlock(nn.Module):
             agg.append(om)
             if not final:
                 mo = self.mesh_obj.forward_pre(pre[1])
-                new_e["obj_mesh"] = e["obj_mesh"] + om
-                new_e["mesh_obj"] = e["mesh_obj"] + mo
+                new_e["obj_mesh"] = _residual(e["obj_mesh"], om)
+                new_e["mesh_obj"] = _residual(e["mesh_obj"], mo)
                 o_agg = _sum_into(o.shape[0], t.node_object, mo)
                 o_new = o + self.obj_node(torch.cat((o, o_agg), dim=-1))
         if self.use_face:
@@ -368,10 +380,10 @@ class ProcessorBlock(nn.Module):
             pre_f = edge_first_layer(self.face_edge.first, q.reshape(c, 3 * L), v, t.face)
             m = self.face_edge.forward_pre(pre_f).view(c, 3, L)
             if not final:
-                new_e["face"] = q + m
+                new_e["face"] = _residual(q, m)
             # Each of the three output vectors goes to its own receiver node.
             agg.append(_sum_into(n, t.face_receivers, m.view(3 * c, L)))
-        v_new = v + self.mesh_node(torch.cat(agg, dim=-1))
+        v_new = _residual(v, self.mesh_node(torch.cat(agg, dim=-1)))
         return v_new, o_new, new_e
 
 
