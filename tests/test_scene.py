@@ -96,3 +96,22 @@ def test_batch_offsets_and_pairs(push_like_xml: str) -> None:
     pairs = b.collision_pairs
     assert torch.equal(b.object_scene[pairs[:, 0]], b.object_scene[pairs[:, 1]])
     assert pairs.shape[0] == 3 * scene.collision_pairs.shape[0]
+
+
+def test_memoised_batches_are_bounded_and_rebuilt_equal(push_like_xml: str) -> None:
+    """``Scene.cached`` keeps at most ``CACHE_ENTRIES`` values (least recently used dropped):
+    batching 40 different counts must not keep 40 batched copies, and a dropped copy is rebuilt
+    equal to the first one while a recently used one is the same object."""
+    from fignet_gym.simulator.scene import CACHE_ENTRIES
+
+    scene = Scene.from_mjmodel(mujoco.MjModel.from_xml_string(push_like_xml))
+    first = scene.repeat(3)
+    kept = scene.repeat(2)
+    for count in range(4, 44):
+        scene.repeat(count)
+        scene.repeat(2)  # used again and again: never the least recent
+        assert len(scene._cache) <= CACHE_ENTRIES
+    assert scene.repeat(2) is kept
+    again = scene.repeat(3)
+    assert again is not first and torch.equal(again.ref_vertices, first.ref_vertices)
+    assert torch.equal(again.node_object, first.node_object)

@@ -9,6 +9,7 @@ one graph. Conventions (object kinds, restitution, poses) are in ``docs/architec
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass, field, replace
 from enum import IntEnum
@@ -19,6 +20,9 @@ import numpy as np
 import torch
 import trimesh
 from torch import Tensor
+
+#: Most memoised values a scene keeps (:meth:`Scene.cached`).
+CACHE_ENTRIES = 16
 
 T = TypeVar("T")
 
@@ -184,7 +188,7 @@ class Scene:
     object_dof_adr: Tensor
     static_poses: Tensor
     num_scenes: int = 1
-    _cache: dict = field(default_factory=dict, compare=False, repr=False)
+    _cache: OrderedDict = field(default_factory=OrderedDict, compare=False, repr=False)
 
     # ----------------------------------------------------------------- construction
     @staticmethod
@@ -318,7 +322,7 @@ class Scene:
                                   np.asarray(poses))
         as_long = lambda x: torch.tensor(x, dtype=torch.long)  # noqa: E731
         return replace(scene, object_body=as_long(bodies), object_mocap=as_long(mocaps),
-                       object_qpos_adr=as_long(qadr), object_dof_adr=as_long(dadr), _cache={})
+                       object_qpos_adr=as_long(qadr), object_dof_adr=as_long(dadr), _cache=OrderedDict())
 
     # ----------------------------------------------------------------- batching
     @staticmethod
@@ -368,10 +372,19 @@ class Scene:
         For data derived from the topology alone (a scene never changes): batched copies, collision
         pairs, the pose-independent parts of graph features. ``key`` must name everything the
         value depends on besides the scene.
+
+        Least recently used entries beyond :data:`CACHE_ENTRIES` are dropped: a caller that
+        batches many different counts (``repeat(k)`` for every planner population or last chunk)
+        must not keep one batched copy per count alive for the scene's lifetime.
         """
-        if key not in self._cache:
-            self._cache[key] = build()
-        return self._cache[key]
+        cache = self._cache
+        if key in cache:
+            cache.move_to_end(key)
+            return cache[key]
+        value = cache[key] = build()
+        while len(cache) > CACHE_ENTRIES:
+            cache.popitem(last=False)
+        return value
 
     # ----------------------------------------------------------------- queries
     @property
