@@ -204,7 +204,8 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--data", required=True, help="generated trajectories (HDF5)")
     f.add_argument("--noise", type=nonnegative_float, nargs="+", default=[1e-4, 1e-3, 1e-2],
                    help="start position errors (m): every free body moved horizontally")
-    f.add_argument("--num", type=int_at_least(1), default=32, help="trajectories to re-simulate")
+    f.add_argument("--num", type=int_at_least(1), default=None,
+                   help="first N trajectories to re-simulate (default: all)")
     f.add_argument("--horizon", type=int_at_least(1), default=50,
                    help="step at which errors are reported")
     f.add_argument("--history", type=int_at_least(1), default=2,
@@ -219,7 +220,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--data", required=True, help="held-out trajectories for the card's scores")
     s.add_argument("--horizon", type=int_at_least(1), default=50,
                    help="step at which errors are reported")
-    s.add_argument("--num", type=int_at_least(1), default=64, help="held-out trajectories to evaluate")
+    s.add_argument("--num", type=int_at_least(1), default=None,
+                   help="first N held-out trajectories to evaluate (default: all)")
     s.add_argument("--dest", help="folder (default: the package's pretrained/)")
     s.add_argument("--notes", default="", help="extra Markdown for the card")
     s.set_defaults(func=_ship)

@@ -479,7 +479,7 @@ def perturbation_floor(trajs: list[Trajectory], position_noise: float, history: 
     return out
 
 
-def floor_table(data: str, noises: list[float], out: str | None = None, num: int = 32,
+def floor_table(data: str, noises: list[float], out: str | None = None, num: int | None = None,
                 horizon: int = 50, history: int = 2) -> list[dict[str, Any]]:
     """Print (and write as JSON to ``out``) :func:`perturbation_floor` at several noise levels."""
     from fignet_gym.data.format import load_trajectories

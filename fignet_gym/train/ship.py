@@ -19,7 +19,7 @@ from fignet_gym.train.evaluation import check_data_matches, rollout_metrics
 from fignet_gym.train.training import median_node_acceleration
 
 
-def ship(run: str, name: str, data: str, horizon: int, num: int = 64, dest: str | None = None,
+def ship(run: str, name: str, data: str, horizon: int, num: int | None = None, dest: str | None = None,
          notes: str = "") -> dict[str, Any]:
     """Export ``run/best.pt`` as ``<dest>/<name>.pt`` and write its model card; returns the metrics."""
     run_dir = Path(run)
