@@ -272,3 +272,26 @@ def test_in_place_residuals_change_nothing_and_keep_gradients(push_sim) -> None:
     first = push_sim.net.blocks[0].mesh_node.first.weight
     assert first.grad is not None and bool(first.grad.abs().sum() > 0)
     push_sim.zero_grad(set_to_none=True)
+
+
+def test_bfloat16_weight_copies_follow_parameter_updates() -> None:
+    """The bf16 mode keeps a bf16 copy of each weight; an in-place update (an optimiser step)
+    must reach the next product, which must equal a product with freshly cast weights."""
+    lin = torch.nn.Linear(64, 64)
+    x = torch.randn(networks.BF16_MIN_ROWS, 64)
+
+    def run() -> torch.Tensor:
+        with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16):
+            return networks.linear(x, lin.weight, lin.bias, relu=True).float()
+
+    def fresh() -> torch.Tensor:
+        xb, wb, bb = x.bfloat16(), lin.weight.detach().bfloat16(), lin.bias.detach().bfloat16()
+        return torch.relu(xb.float() @ wb.float().T + bb.float())
+
+    before = run()
+    assert torch.allclose(before, fresh(), rtol=2e-2, atol=2e-2)
+    with torch.no_grad():
+        lin.weight.mul_(-1.0)
+    after = run()
+    assert torch.allclose(after, fresh(), rtol=2e-2, atol=2e-2)
+    assert not torch.allclose(after, before, atol=1e-1)

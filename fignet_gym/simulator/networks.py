@@ -57,6 +57,39 @@ def _fused_ok(x: Tensor, w: Tensor) -> bool:
 _ONEDNN = torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_linear_pointwise")
 
 
+#: Fewest rows for the bf16 oneDNN kernel: below, its per-call cost exceeds autocast's path.
+BF16_MIN_ROWS = 1024
+
+
+def _bf16_ok(x: Tensor) -> bool:
+    """Whether the opt-in bf16 mode (CPU autocast to bfloat16) runs this product on oneDNN."""
+    return (_ONEDNN and x.device.type == "cpu" and x.dim() == 2 and x.shape[0] >= BF16_MIN_ROWS
+            and not torch.is_grad_enabled()
+            and torch.is_autocast_enabled("cpu")
+            and torch.get_autocast_dtype("cpu") == torch.bfloat16)
+
+
+def _cacheable(t: Tensor | None) -> bool:
+    """A parameter whose in-place updates are counted (inference tensors keep no counter)."""
+    return isinstance(t, nn.Parameter) and not t.is_inference()
+
+
+def _bf16_weights(w: Tensor, b: Tensor | None) -> tuple[Tensor, Tensor | None]:
+    """``w`` and ``b`` in bfloat16; a parameter's copy is kept until the parameter changes.
+
+    Kept on the parameter itself: autocast casts on every call, which costs as much as the
+    narrow products it speeds up. Derived weights (slices, stacked blocks) are cast each call.
+    """
+    bb = None if b is None else b.to(torch.bfloat16)
+    if not _cacheable(w):
+        return w.to(torch.bfloat16).contiguous(), bb
+    hit = getattr(w, "_bf16_copy", None)
+    if hit is None or hit[0] != w._version:
+        hit = (w._version, w.detach().to(torch.bfloat16).contiguous())
+        w._bf16_copy = hit
+    return hit[1], bb
+
+
 def linear(x: Tensor, w: Tensor, b: Tensor | None = None, relu: bool = False) -> Tensor:
     """``F.linear`` (then ReLU if ``relu``) whose rows round as they would inside any larger batch.
 
@@ -69,7 +102,11 @@ def linear(x: Tensor, w: Tensor, b: Tensor | None = None, relu: bool = False) ->
     pad = 0 < m < MIN_ROWS
     if pad:
         x = F.pad(x, (0, 0, 0, MIN_ROWS - m))
-    if _fused_ok(x, w):
+    if _bf16_ok(x):
+        wb, bb = _bf16_weights(w, b)
+        out = torch.ops.mkldnn._linear_pointwise(x.to(torch.bfloat16).contiguous(), wb, bb,
+                                                 "relu" if relu else "none", [], "")
+    elif _fused_ok(x, w):
         out = torch.ops.mkldnn._linear_pointwise(x.contiguous(), w.contiguous(), b,
                                                  "relu" if relu else "none", [], "")
     else:
