@@ -24,6 +24,7 @@ product.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import torch
@@ -69,6 +70,10 @@ def _bf16_ok(x: Tensor) -> bool:
             and torch.get_autocast_dtype("cpu") == torch.bfloat16)
 
 
+#: ``id(parameter) -> (weakref, version, bf16 copy)`` for the bf16 mode.
+_BF16_COPIES: dict[int, tuple] = {}
+
+
 def _cacheable(t: Tensor | None) -> bool:
     """A parameter whose in-place updates are counted (inference tensors keep no counter)."""
     return isinstance(t, nn.Parameter) and not t.is_inference()
@@ -77,17 +82,20 @@ def _cacheable(t: Tensor | None) -> bool:
 def _bf16_weights(w: Tensor, b: Tensor | None) -> tuple[Tensor, Tensor | None]:
     """``w`` and ``b`` in bfloat16; a parameter's copy is kept until the parameter changes.
 
-    Kept on the parameter itself: autocast casts on every call, which costs as much as the
-    narrow products it speeds up. Derived weights (slices, stacked blocks) are cast each call.
+    Autocast casts on every call, which costs as much as the narrow products it speeds up.
+    Derived weights (slices, stacked blocks) are cast each call. The copies live in a table
+    beside the parameters (an attribute on them would be pickled into saved checkpoints).
     """
     bb = None if b is None else b.to(torch.bfloat16)
     if not _cacheable(w):
         return w.to(torch.bfloat16).contiguous(), bb
-    hit = getattr(w, "_bf16_copy", None)
-    if hit is None or hit[0] != w._version:
-        hit = (w._version, w.detach().to(torch.bfloat16).contiguous())
-        w._bf16_copy = hit
-    return hit[1], bb
+    hit = _BF16_COPIES.get(id(w))
+    if hit is None or hit[0]() is not w or hit[1] != w._version:
+        if hit is None or hit[0]() is not w:
+            weakref.finalize(w, _BF16_COPIES.pop, id(w), None)
+        hit = (weakref.ref(w), w._version, w.detach().to(torch.bfloat16).contiguous())
+        _BF16_COPIES[id(w)] = hit
+    return hit[2], bb
 
 
 def linear(x: Tensor, w: Tensor, b: Tensor | None = None, relu: bool = False) -> Tensor:
