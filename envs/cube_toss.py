@@ -15,7 +15,7 @@ from gymnasium import spaces
 from fignet_gym.dynamics import Dynamics
 from fignet_gym.envs.base import MjDynamicsEnv, add_disc, free_camera, layout, layout_size
 from fignet_gym.envs.vector import SingleEnvVectorEnv
-from fignet_gym.mjcf import restitution_to_dampratio
+from fignet_gym.mjcf import cube_scene_xml, restitution_to_dampratio
 
 #: The ContactNets cube (``params_processed/experiment.json``, lengths in metres): half-width,
 #: mass (kg), principal inertia (kg m^2), nominal friction and restitution; the data's step (s).
@@ -89,27 +89,12 @@ def mujoco_parameters(spec: str | os.PathLike | dict[str, Any] | None = None) ->
 def cube_toss_xml(params: dict[str, Any]) -> str:
     """MJCF of the cube (free joint, box ``cube``) over the floor plane (the world body) with
     MuJoCo parameters ``params`` (as :func:`mujoco_parameters` returns them)."""
-    h, fl = CUBE_HALF_WIDTH, FLOOR_HALF_SIZE
-    fr = " ".join(f"{x:.9g}" for x in params["friction"])
-    solref = f'{params["timeconst"]:.9g} {params["dampratio"]:.9g}'
-    return f"""<mujoco model="cube_toss">
-  <option timestep="{params['timestep']:.9g}" gravity="0 0 {params['gravity']:.9g}"
-          cone="{params['cone']}" impratio="{params['impratio']:.9g}"/>
-  <visual><global offwidth="640" offheight="640"/></visual>
-  <worldbody>
-    <light pos="0 0 3" dir="0 0 -1" directional="true"/>
-    <geom name="floor" type="plane" size="{fl} {fl} 0.05" rgba=".85 .85 .85 1"
-          friction="{fr}" solref="{solref}"/>
-    <body name="cube" pos="0 0 {2 * h:.9g}">
-      <freejoint name="cube"/>
-      <inertial pos="0 0 0" mass="{CUBE_MASS:.9g}"
-                diaginertia="{CUBE_INERTIA:.9g} {CUBE_INERTIA:.9g} {CUBE_INERTIA:.9g}"/>
-      <geom name="cube" type="box" size="{h:.9g} {h:.9g} {h:.9g}" friction="{fr}" solref="{solref}"
-            rgba=".8 .25 .2 1"/>
-    </body>
-  </worldbody>
-</mujoco>
-"""
+    return cube_scene_xml(
+        CUBE_HALF_WIDTH, CUBE_MASS, CUBE_INERTIA, params["friction"], None,
+        timestep=float(params["timestep"]), gravity=float(params["gravity"]),
+        floor_half_size=FLOOR_HALF_SIZE, contact_timeconst=float(params["timeconst"]),
+        dampratio=float(params["dampratio"]), cone=params["cone"],
+        impratio=float(params["impratio"]))
 
 
 def resting_yaw(quat: np.ndarray) -> float:
