@@ -53,6 +53,7 @@ EVAL_KEYS = (
     "episode_position_errors",
     "episode_orientation_errors",
     "episode_successes",
+    "episode_initial_observations",
 )
 
 
@@ -261,7 +262,8 @@ def evaluate_policy_on(
         and ``final_orientation_error`` (rad) averaged over episodes (from the last step's
         ``info``), ``diverged_rate`` (episodes the dynamics blew up in), and per-episode lists
         ``episode_returns``, ``episode_position_errors``, ``episode_orientation_errors``,
-        ``episode_successes``.
+        ``episode_successes`` and ``episode_initial_observations`` (each episode's first
+        observation: set by its seed alone, so equal across dynamics for the same seeds).
     """
     if n_episodes < 1:
         raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
@@ -297,6 +299,7 @@ def evaluate_policy_on(
         "episode_position_errors": pos.tolist(),
         "episode_orientation_errors": yaw.tolist(),
         "episode_successes": success,
+        "episode_initial_observations": [e["initial_observation"] for e in episodes],
     }
 
 
@@ -306,6 +309,7 @@ def _run_batch(
     """One episode per sub-environment (seeds ``seed + i``); per-episode final statistics."""
     n = venv.num_envs
     obs, _ = venv.reset(seed=seed)
+    first_obs = np.asarray(obs, dtype=np.float64).copy()
     running = np.ones(n, dtype=bool)
     returns, lengths = np.zeros(n), np.zeros(n, dtype=np.int64)
     finals: list[dict[str, Any]] = [{} for _ in range(n)]
@@ -331,6 +335,7 @@ def _run_batch(
             "position_error": float(finals[i].get("position_error", math.nan)),
             "orientation_error": float(finals[i].get("orientation_error", math.nan)),
             "diverged": finals[i].get("diverged") is not None,
+            "initial_observation": first_obs[i].tolist(),
         }
         for i in range(n)
     ]

@@ -103,6 +103,12 @@ def test_final_eval_covers_both_dynamics_on_the_same_seeds(stopped_and_resumed: 
     for rep in res["eval"].values():
         assert rep["n_episodes"] == TINY.final_episodes
         assert np.isfinite(rep["episode_returns"]).all()
+    # Same seeds, same episodes: each episode starts where its namesake on the other dynamics
+    # does, and the episodes differ from each other (distinct seeds).
+    starts = {d: np.array(rep["episode_initial_observations"]) for d, rep in res["eval"].items()}
+    assert starts["mujoco"].shape[0] == TINY.final_episodes
+    np.testing.assert_array_equal(starts["mujoco"], starts["fignet"])
+    assert not np.array_equal(starts["mujoco"][0], starts["mujoco"][1])
     saved = json.loads((stopped_and_resumed["root"] / "final_eval.json").read_text())
     assert saved["eval"]["mujoco"]["episode_returns"] == res["eval"]["mujoco"]["episode_returns"]
     assert EVAL_SEED > TINY.ppo.seed + TINY.ppo.num_envs
