@@ -94,13 +94,29 @@ def _ship(args: argparse.Namespace) -> int:
 
 
 def _sim2real(args: argparse.Namespace) -> int:
-    from fignet_gym.train.sim2real import default_train, parse_sizes, run_sim2real
+    from fignet_gym.train.sim2real import (
+        FINETUNE_OVERRIDES,
+        Sim2RealError,
+        default_train,
+        parse_sizes,
+        pretrain_checkpoint,
+        run_sim2real,
+    )
 
+    overrides = _overrides(args.set) or None
+    init = args.init
+    if args.pretrain:
+        if init is not None:
+            raise Sim2RealError("--pretrain and --init both choose where FIGNet starts: pass one")
+        init = str(pretrain_checkpoint(args.out))
+        train_fn = default_train(args.config, args.budget, {**FINETUNE_OVERRIDES, **(overrides or {})}, init)
+    else:
+        train_fn = default_train(args.config, args.budget, overrides, init)
     run_sim2real(args.data, args.out, parse_sizes(args.sizes), fractions=args.fractions,
                  seed=args.seed, horizon=args.horizon, resume=args.resume,
                  fit_evaluations=args.fit_evaluations, fit_trajectories=args.fit_trajectories,
-                 train_fn=default_train(args.config, args.budget, _overrides(args.set) or None, args.init),
-                 fignet=not args.no_fignet)
+                 train_fn=train_fn, fignet=not args.no_fignet, pretrain=args.pretrain,
+                 config=args.config, overrides=overrides)
     return 0
 
 
@@ -288,6 +304,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--init", default=None, help="warm-start FIGNet from a checkpoint or pretrained name")
     r.add_argument("--set", help='JSON overrides of the training config, e.g. \'{"training.lr": 5e-4}\'')
     r.add_argument("--no-fignet", action="store_true", help="MuJoCo stages only")
+    r.add_argument("--pretrain", type=int_at_least(0), default=0, metavar="N",
+                   help="pretrain FIGNet on N synthetic tosses from MuJoCo fitted on the smallest "
+                        "size's trajectories, then fine-tune each size (0: from scratch)")
     r.set_defaults(func=_sim2real)
 
     register_data(sub)

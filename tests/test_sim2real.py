@@ -219,3 +219,110 @@ def test_mit_standin_has_noise_per_push_friction_and_pusher_penetration(tmp_path
     # than the imported tip's 4.75 mm radius: the median contact distance is about 3.75 mm
     near = np.array([d for d in closest if d < 0.006])
     assert len(near) > 10 and float(np.median(near)) < 0.0043
+
+
+# --------------------------------------------------------------------------- synthetic pretraining
+
+
+def _horizontal_speed(poses: np.ndarray, o: int, dt: float) -> float:
+    return float(np.linalg.norm((poses[2, o, :2] - poses[0, o, :2]) / (2 * dt)))
+
+
+def test_synthetic_tosses_are_mujoco_from_a_varied_release(tmp_path: Path) -> None:
+    from fignet_gym.train.synthetic import Perturbation, synthetic_tosses
+
+    data = tmp_path / "cube.h5"
+    import_contactnets(SAMPLE, data)
+    src = load_trajectories(data)
+    params = ContactParams(friction=0.18, cone="elliptic", substeps=4)
+    synth = synthetic_tosses(src, params, 4, seed=3, progress=False)
+    again_seeded = synthetic_tosses(src, params, 4, seed=3, progress=False)
+    assert all(np.array_equal(a.poses, b.poses) for a, b in zip(synth, again_seeded, strict=True))
+    other = synthetic_tosses(src, params, 4, seed=4, progress=False)
+    assert not np.array_equal(synth[0].poses, other[0].poses)
+    by_name = {t.name: t for t in src}
+    dyn = MujocoDynamics(nthread=1)
+    for t in synth:
+        s = by_name[t.metadata["synthetic_from"]]
+        assert t.poses.shape == s.poses.shape and t.mjcf == s.mjcf
+        o = int(np.flatnonzero(t.kinds == 0)[0])
+        # The release is the source's, varied within the stated ranges: the horizontal speed
+        # (central difference of poses 0 and 2, as MuJoCo starts) by 0.85-1.15x, a new orientation.
+        ratio = _horizontal_speed(t.poses, o, t.dt) / _horizontal_speed(s.poses, o, s.dt)
+        assert 0.85 - 1e-3 <= ratio <= 1.15 + 1e-3
+        assert abs(abs(float(t.poses[1, o, 3:] @ s.poses[1, o, 3:])) - 1) > 1e-3
+        assert t.poses[1, o, 2] == pytest.approx(s.poses[1, o, 2], abs=1e-6)  # same release height
+        # Every later pose is the fitted MuJoCo's from that release: replaying the synthetic
+        # toss's own first poses in MuJoCo follows it through the free flight (not exactly: pose
+        # 2 is MuJoCo's, so the replay's central difference differs by MuJoCo's integration
+        # error of one step, tens of micrometres) ...
+        again = Replay(t).rollout(params, dyn, given=3)
+        assert np.abs(again[:8, o, :3] - t.poses[:8, o, :3]).max() < 3e-4
+        # ... which the source's own release does not.
+        assert np.abs(Replay(s).rollout(params, dyn, given=3)[:8, o, :3] - t.poses[:8, o, :3]).max() > 3e-3
+        assert t.poses[1:, o, 2].min() < t.poses[1, o, 2] - 0.05  # it falls and lands
+    narrow = synthetic_tosses(src, params, 2, seed=3, progress=False,
+                              perturbation=Perturbation(speed_scale=(1.0, 1.0), random_orientation=False))
+    for t in narrow:
+        s = by_name[t.metadata["synthetic_from"]]
+        o = int(np.flatnonzero(t.kinds == 0)[0])
+        speed = _horizontal_speed(s.poses, o, s.dt)
+        assert _horizontal_speed(t.poses, o, t.dt) == pytest.approx(speed, rel=1e-4)
+
+
+def test_synthetic_tosses_refuse_pushes_and_tosses_that_start_on_the_ground(tmp_path: Path) -> None:
+    from fignet_gym.train.synthetic import check_tosses, synthetic_tosses
+
+    push = next(iter_trajectories("push", 1, seed=5))
+    with pytest.raises(ValueError, match="kinematic objects"):
+        synthetic_tosses([push], ContactParams(), 1, progress=False)
+    data = tmp_path / "cube.h5"
+    import_contactnets(SAMPLE, data)
+    toss = load_trajectories(data)[0]
+    o = int(np.flatnonzero(toss.kinds == 0)[0])
+    poses = toss.poses.copy()
+    poses[:, o, 2] -= poses[1, o, 2] - 0.05  # the cube's centre 5 cm up: a corner is in the ground
+    from dataclasses import replace
+
+    with pytest.raises(ValueError, match="starts on the ground"):
+        check_tosses([replace(toss, poses=poses)])
+    check_tosses([toss])
+
+
+def test_sim2real_pretrain_fits_on_the_smallest_subset_and_fine_tunes_each_size(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
+    import fignet_gym.train.sim2real as s2r
+
+    data = tmp_path / "cube.h5"
+    import_contactnets(SAMPLE, data)
+    monkeypatch.setattr(s2r, "PRETRAIN_STEPS", 2)
+    out = tmp_path / "run"
+    tiny = json.dumps({"training.valid_every": 1, "training.batch_size": 1,
+                       "training.valid_trajectories": 1})
+    argv = ["sim2real", "--data", str(data), "--out", str(out), "--fractions", "0.5", "0.25",
+            "0.25", "--fit-evaluations", "4", "--fit-trajectories", "2", "--sizes", "1", "all",
+            "--budget", "2", "--pretrain", "3", "--set", tiny]
+    assert main(argv) == 0
+    res = json.loads((out / "results.json").read_text())
+    pre = res["pretrain"]
+    assert pre["source_trajectories"] == 1 and pre["synthetic_tosses"] == 3
+    assert len(load_trajectories(out / "pretrain" / "synthetic.h5")) == 3
+    split = json.loads((out / "split" / "split.json").read_text())
+    fit = json.loads((out / "pretrain" / "fit.json").read_text())
+    assert fit["params"] != res["fit"]["params"]  # fitted on 1 trajectory, not the split's 2
+    synth_from = {t.metadata["synthetic_from"] for t in load_trajectories(out / "pretrain" / "synthetic.h5")}
+    assert synth_from == {load_trajectories(out / "split" / "train.h5")[0].name}
+    assert len(split["train"]) == 2
+    for label in ("1", "all"):
+        run_cfg = json.loads((out / f"fignet_{label}" / "config.json").read_text())
+        assert run_cfg["training"]["lr"] == s2r.FINETUNE_OVERRIDES["training.lr"]
+    assert set(res["cpu_hours"]["fignet"]) == {"1", "all"}
+    parts = res["cpu_hours"]
+    stages = parts["mujoco_fit"] + parts["pretrain"] + sum(parts["fignet"].values())
+    assert parts["total"] == pytest.approx(stages)
+    assert "initialised from" in capsys.readouterr().out
+    # --pretrain and --init exclude each other; a run started without --pretrain is not resumed with it
+    assert main(argv + ["--init", "push", "--resume"]) == 2
+    assert "--pretrain and --init" in capsys.readouterr().err
+    assert main([a if a != "3" else "0" for a in argv] + ["--resume"]) == 2
+    assert "started with" in capsys.readouterr().err

@@ -9,11 +9,17 @@ run resumes from its last checkpoint):
 3. ``mujoco_fit.json``: contact parameters fitted on training, selected on validation
    (:func:`~fignet_gym.train.sysid.fit_contact_params`); ``mujoco_fitted_env.json`` is the same in
    the ``CubeToss-v0`` env's form. ``mujoco_fitted.json``: the fitted MuJoCo on test.
-4. ``fignet_<size>/``: a FIGNet run on the first ``size`` training trajectories (the training
+4. ``pretrain/`` (only with ``pretrain`` > 0, ``--pretrain N``): MuJoCo fitted on the first
+   ``min(sizes)`` training trajectories (``fit.json``; every size's subset contains them, so no
+   model sees a trajectory outside its own subset), ``N`` synthetic tosses re-simulated in it
+   from randomised releases (``synthetic.h5``, :mod:`fignet_gym.train.synthetic`), and a FIGNet
+   pretrained on them (``run/``, selected on the real validation split). Each size then fine-tunes
+   it (:data:`FINETUNE_OVERRIDES`) instead of training from scratch.
+5. ``fignet_<size>/``: a FIGNet run on the first ``size`` training trajectories (the training
    step is :func:`default_train`, a call to ``fignet_gym.train.real.train_on_split``; any callable
    ``(train_file, valid_file, size, out_dir) -> checkpoint`` can replace it), and
    ``fignet_<size>.json``: its test metrics, with paired bootstrap ratios to fitted MuJoCo.
-5. ``results.json``, ``table.md`` and ``errors_vs_size.png``.
+6. ``results.json`` (with the CPU hours of every stage), ``table.md`` and ``errors_vs_size.png``.
 
 Errors: median translation RMSE and rotation error over test trajectories at frame ``horizon``
 counted from frame 0 (50: 0.34 s on the cube data) and at each trajectory's last frame, each also
@@ -39,6 +45,18 @@ TrainFn = Callable[[Path, Path, "int | None", Path], Path]
 #: Columns of the table: (key prefix, heading).
 _QUANTITIES = (("translation_rmse_final", "transl. @h (mm)"), ("rotation_deg_final", "rot. @h (deg)"),
                ("translation_rmse_last", "transl. last (mm)"), ("rotation_deg_last", "rot. last (deg)"))
+
+
+#: ``--pretrain``: optimiser steps on the synthetic tosses (pushforward after 1/8 of them).
+PRETRAIN_STEPS = 8000
+#: ``--pretrain``: each size fine-tunes the pretrained model at these learning rates (the
+#: preset's 1e-3 start would undo the pretraining).
+FINETUNE_OVERRIDES: dict[str, Any] = {"training.lr": 3e-4, "training.lr_final": 3e-5}
+
+
+def pretrain_checkpoint(out: str | os.PathLike) -> Path:
+    """Where a ``--pretrain`` run in ``out`` keeps its pretrained model (what sizes fine-tune)."""
+    return Path(out) / "pretrain" / "run" / "best.pt"
 
 
 class Sim2RealError(ValueError):
@@ -147,8 +165,14 @@ def run_sim2real(
     *, fractions: Sequence[float] = DEFAULT_FRACTIONS, seed: int = 0, horizon: int = 50,
     given: int = 3, resume: bool = False, fit_evaluations: int = 240, fit_trajectories: int = 64,
     train_fn: TrainFn | None = None, fignet: bool = True, base_params: Any = None,
+    pretrain: int = 0, config: str = "cube-real", overrides: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Run every stage (see the module docstring) and return the results dict."""
+    """Run every stage (see the module docstring) and return the results dict.
+
+    ``pretrain``: synthetic tosses to pretrain on (0: none). ``config`` and ``overrides`` are the
+    pretraining's recipe; ``train_fn`` trains each size (default: :func:`default_train`, which
+    with ``pretrain`` fine-tunes :func:`pretrain_checkpoint`).
+    """
     from fignet_gym.data.format import load_trajectories
     from fignet_gym.train.analytic import ContactParams
     from fignet_gym.train.evaluation import paired_ratios, rollout_metrics
@@ -163,9 +187,9 @@ def run_sim2real(
     config_path = out / "run.json"
     run_cfg = {"data": str(data), "fractions": list(fractions), "seed": seed, "horizon": horizon,
                "given_poses": given, "fit_evaluations": fit_evaluations,
-               "fit_trajectories": fit_trajectories}
+               "fit_trajectories": fit_trajectories, "pretrain": pretrain}
     old = _read(config_path)
-    if old is not None and {k: old.get(k) for k in run_cfg} != run_cfg:
+    if old is not None and {k: old.get(k, 0 if k == "pretrain" else None) for k in run_cfg} != run_cfg:
         raise Sim2RealError(f"{config_path}: this run was started with {old}, not {run_cfg}: "
                             "resume it with the same options or use another --out")
     _write(config_path, run_cfg)
@@ -203,9 +227,20 @@ def run_sim2real(
         fitted = _mujoco_metrics(test, fitted_params, given, horizon)
         _write(out / "mujoco_fitted.json", fitted)
 
+    cpu_hours: dict[str, Any] = {"mujoco_fit": fit.get("cpu_seconds", math.nan) / 3600}
+    if pretrain and fignet:
+        k0 = min([s for s in sizes if s is not None], default=n_train)
+        info = _pretrain(train[:k0], valid, split_dir / "valid.h5", out / "pretrain", pretrain,
+                         config=config, overrides=overrides, fit_evaluations=fit_evaluations,
+                         fit_trajectories=fit_trajectories, given=given, horizon=horizon, seed=seed)
+        stages["pretrain"] = info
+        cpu_hours["pretrain"] = info["cpu_hours"]
     learned: dict[str, Any] = {}
     if fignet:
-        train_fn = train_fn or default_train()
+        if train_fn is None:
+            train_fn = (default_train(config, None, {**FINETUNE_OVERRIDES, **(overrides or {})},
+                                      init=str(pretrain_checkpoint(out))) if pretrain
+                        else default_train(config, None, overrides))
         for size in sizes:
             label = _size_label(size)
             path = out / f"fignet_{label}.json"
@@ -226,7 +261,12 @@ def run_sim2real(
                 res["vs_fitted_mujoco"] = paired_ratios(res, fitted)
                 _write(path, res)
             learned[label] = res
-    results = {"run": run_cfg, **stages, "fit": {k: fit[k] for k in ("params", "valid", "cpu_seconds")},
+            done = _read(out / f"fignet_{label}" / "done.json")
+            cpu_hours.setdefault("fignet", {})[label] = done["cpu_hours"] if done else math.nan
+    cpu_hours["total"] = (cpu_hours["mujoco_fit"] + cpu_hours.get("pretrain", 0.0)
+                          + sum(cpu_hours.get("fignet", {}).values()))
+    results = {"run": run_cfg, **stages, "cpu_hours": cpu_hours,
+               "fit": {k: fit[k] for k in ("params", "valid", "cpu_seconds")},
                "mujoco_nominal": _headline(nominal), "mujoco_fitted": _headline(fitted),
                "no_motion": _headline(fitted, prefix="still_"),
                "fignet": {k: {**_headline(v), "training_trajectories": v["training_trajectories"],
@@ -238,6 +278,41 @@ def run_sim2real(
     print(table)
     print(f"wrote {results_path}, {out / 'table.md'}, {out / 'errors_vs_size.png'}")
     return results
+
+
+def _pretrain(train: list, valid: list, valid_file: Path, out: Path, num: int, *, config: str,
+              overrides: dict[str, Any] | None, fit_evaluations: int, fit_trajectories: int,
+              given: int, horizon: int, seed: int) -> dict[str, Any]:
+    """The ``pretrain/`` stage (module docstring) on the real trajectories ``train``; resumable."""
+    from fignet_gym.data.format import write_trajectories
+    from fignet_gym.train.analytic import ContactParams
+    from fignet_gym.train.real import free_flight_gravity, train_on_split
+    from fignet_gym.train.synthetic import check_tosses, synthetic_tosses
+    from fignet_gym.train.sysid import fit_contact_params
+
+    try:
+        check_tosses(train)
+    except ValueError as exc:
+        raise Sim2RealError(f"--pretrain: {exc}") from None
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"pretraining: MuJoCo fitted on {len(train)} training trajectories ...")
+    fit = fit_contact_params(train, valid, out / "fit.json", evaluations=fit_evaluations,
+                             fit_trajectories=min(fit_trajectories, len(train)), given=given,
+                             horizon=horizon, seed=seed)
+    synth = out / "synthetic.h5"
+    t0 = time.process_time()
+    if not synth.is_file():
+        write_trajectories(synth, synthetic_tosses(train, ContactParams.from_json(fit["params"]),
+                                                   num, seed))
+    gen_seconds = time.process_time() - t0
+    print(f"pretraining: FIGNet on {num} synthetic tosses ...")
+    sets = {"simulator.gravity": (0.0, 0.0, free_flight_gravity(train)), **(overrides or {})}
+    best = train_on_split(synth, valid_file, None, out / "run", PRETRAIN_STEPS, config=config,
+                          overrides=sets, seed=seed)
+    done = json.loads((out / "run" / "done.json").read_text())
+    return {"source_trajectories": len(train), "synthetic_tosses": num, "checkpoint": str(best),
+            "fit": fit["params"], "fit_valid": fit["valid"],
+            "cpu_hours": (fit.get("cpu_seconds", 0.0) + gen_seconds) / 3600 + done["cpu_hours"]}
 
 
 def _headline(res: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -323,5 +398,5 @@ def summary_lines(results: dict[str, Any]) -> list[str]:
     return [f"fitted MuJoCo: {text}"]
 
 
-__all__ = ["Sim2RealError", "default_train", "format_table", "parse_sizes", "plot_sizes",
-           "run_sim2real", "summary_lines"]
+__all__ = ["FINETUNE_OVERRIDES", "PRETRAIN_STEPS", "Sim2RealError", "default_train", "format_table",
+           "parse_sizes", "plot_sizes", "pretrain_checkpoint", "run_sim2real", "summary_lines"]
