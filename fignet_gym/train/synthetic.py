@@ -118,7 +118,8 @@ def synthetic_tosses(
         i = int(rng.integers(len(trajs)))
         src, scene = trajs[i], scenes[i]
         poses = np.asarray(src.poses, np.float64).copy()
-        dt, g = src.dt, np.array([0.0, 0.0, params.gravity if params.gravity is not None else -9.81])
+        dt = src.dt
+        g = Replay(src).model(params).opt.gravity.copy()  # the fit's, else the MJCF's
         dyn = [o for o, k in enumerate(src.kinds) if k == int(ObjectKind.DYNAMIC)]
         for o in dyn:
             p1 = poses[1, o, :3].copy()
