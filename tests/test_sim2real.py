@@ -287,6 +287,12 @@ def test_synthetic_tosses_refuse_pushes_and_tosses_that_start_on_the_ground(tmp_
     with pytest.raises(ValueError, match="starts on the ground"):
         check_tosses([replace(toss, poses=poses)])
     check_tosses([toss])
+    # Released face-down 1.1 cm above the ground: almost no random orientation clears 1 cm.
+    low = toss.poses.copy()
+    low[:, o, 2] += 0.0635 - low[1, o, 2]
+    low[:, o, 3:] = [1.0, 0.0, 0.0, 0.0]
+    with pytest.raises(ValueError, match="releases drawn"):
+        synthetic_tosses([replace(toss, poses=low)], ContactParams(), 1, progress=False)
 
 
 def test_sim2real_pretrain_fits_on_the_smallest_subset_and_fine_tunes_each_size(
