@@ -49,9 +49,12 @@ _QUANTITIES = (("translation_rmse_final", "transl. @h (mm)"), ("rotation_deg_fin
 
 #: ``--pretrain``: optimiser steps on the synthetic tosses (pushforward after 1/8 of them).
 PRETRAIN_STEPS = 8000
-#: ``--pretrain``: each size fine-tunes the pretrained model at these learning rates (the
-#: preset's 1e-3 start would undo the pretraining).
-FINETUNE_OVERRIDES: dict[str, Any] = {"training.lr": 3e-4, "training.lr_final": 3e-5}
+#: ``--pretrain``: how each size fine-tunes the pretrained model: a low learning rate and
+#: pushforward from the first step (on 8 real tosses, 1e-4 or plain one-step training first lost
+#: the pretraining's rollouts within 250 steps; docs/experiments.md, Issue 14, "Pretraining on a
+#: fitted MuJoCo").
+FINETUNE_OVERRIDES: dict[str, Any] = {"training.lr": 3e-5, "training.lr_final": 1e-5,
+                                      "training.unroll_after": 0}
 
 
 def pretrain_checkpoint(out: str | os.PathLike) -> Path:
