@@ -15,6 +15,7 @@ import torch
 from fignet_gym.data.format import Trajectory, write_trajectories
 from fignet_gym.envs.cube_toss import DATA_DT, cube_toss_xml, mujoco_parameters
 from fignet_gym.pretrained import load_pretrained
+from fignet_gym.simulator.model import LearnedSimulator
 from fignet_gym.simulator.scene import Scene
 from fignet_gym.train.real import (
     TrainingInterrupted,
@@ -113,6 +114,27 @@ def test_init_accepts_a_pretrained_name(tmp_path: Path) -> None:
     trainer = Trainer(sim_cfg, cfg, trajs[:1], trajs[1:], tmp_path / "ft", init="toss")
     for (name, a), b in zip(source.state_dict().items(), trainer.sim.state_dict().values(), strict=True):
         assert torch.equal(a, b), name
+
+
+def test_a_warm_start_is_validated_before_its_first_step_and_can_stay_best(tmp_path: Path) -> None:
+    trajs = cube_tosses(4, -9.6)
+    base = train_on_split(trajs[:2], trajs[3:], None, tmp_path / "base", budget=4, overrides=TINY)
+    sim_cfg, cfg = load_run_config("cube-real", {**TINY, "training.steps": 2, "training.lr": 1e-12,
+                                                 "training.lr_final": 1e-12})
+    trainer = Trainer(sim_cfg, cfg, trajs[:2], trajs[3:], tmp_path / "ft", init=str(base))
+    trainer.run()
+    steps = [json.loads(line)["step"] for line in (tmp_path / "ft" / "curve.jsonl").read_text().splitlines()]
+    assert steps[0] == 0 and steps[1:] == sorted(steps[1:]) and steps[-1] == 2
+    # A learning rate below float32's resolution leaves the weights as they were, so every later
+    # validation ties with step 0 and the start stays the best checkpoint.
+    best = torch.load(tmp_path / "ft" / "best.pt", weights_only=True)
+    assert best["meta"]["valid"]["step"] == 0
+    start = LearnedSimulator.load(base).state_dict()
+    for name, value in LearnedSimulator.load(tmp_path / "ft" / "best.pt").state_dict().items():
+        assert torch.equal(value, start[name]), name
+    # A run from scratch has no step-0 validation.
+    first = json.loads((tmp_path / "base" / "curve.jsonl").read_text().splitlines()[0])["step"]
+    assert first > 0
 
 
 def test_cli_init_with_an_unknown_name_is_one_error_line(tmp_path: Path) -> None:

@@ -404,7 +404,8 @@ class Trainer:
             scale = median_node_acceleration(train, self.train_scenes)
             config = replace(config, noise_std=cfg.noise_fraction * scale)
         self._build(config)
-        if init is not None and blob is None:
+        self.warm_started = init is not None and blob is None
+        if self.warm_started:
             # Fine-tuning: weights and normaliser statistics from another run, this run's recipe.
             warm_start(self.sim, load_checkpoint(init))
             print(f"initialised from {init}")
@@ -570,6 +571,10 @@ class Trainer:
                    dynamic_ncols=True, disable=not lead)
         end = self.cfg.steps if stop_after is None else min(self.cfg.steps, st.step + stop_after)
         try:
+            if lead and self.warm_started and st.step == 0 and not st.history:
+                # The start of a fine-tuning is a candidate too: on a few real trajectories after
+                # pretraining, every later checkpoint can be worse (docs/experiments.md, Issue 14).
+                self.validate(writer)
             while st.step < end and not stop["flag"]:
                 # The budget is the training step itself: validation rollouts (costly for
                 # node-based baselines with many edges) and checkpoint writes are not charged.
