@@ -94,29 +94,13 @@ def _ship(args: argparse.Namespace) -> int:
 
 
 def _sim2real(args: argparse.Namespace) -> int:
-    from fignet_gym.train.sim2real import (
-        FINETUNE_OVERRIDES,
-        Sim2RealError,
-        default_train,
-        parse_sizes,
-        pretrain_checkpoint,
-        run_sim2real,
-    )
+    from fignet_gym.train.sim2real import parse_sizes, run_sim2real
 
-    overrides = _overrides(args.set) or None
-    init = args.init
-    if args.pretrain:
-        if init is not None:
-            raise Sim2RealError("--pretrain and --init both choose where FIGNet starts: pass one")
-        init = str(pretrain_checkpoint(args.out))
-        train_fn = default_train(args.config, args.budget, {**FINETUNE_OVERRIDES, **(overrides or {})}, init)
-    else:
-        train_fn = default_train(args.config, args.budget, overrides, init)
     run_sim2real(args.data, args.out, parse_sizes(args.sizes), fractions=args.fractions,
                  seed=args.seed, horizon=args.horizon, resume=args.resume,
                  fit_evaluations=args.fit_evaluations, fit_trajectories=args.fit_trajectories,
-                 train_fn=train_fn, fignet=not args.no_fignet, pretrain=args.pretrain,
-                 config=args.config, overrides=overrides)
+                 fignet=not args.no_fignet, pretrain=args.pretrain, config=args.config,
+                 budget=args.budget, overrides=_overrides(args.set) or None, init=args.init)
     return 0
 
 

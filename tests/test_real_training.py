@@ -152,8 +152,6 @@ def test_cli_init_with_an_unknown_name_is_one_error_line(tmp_path: Path) -> None
 
 def test_sim2real_warm_start_raises_when_interrupted(tmp_path: Path,
                                                      monkeypatch: pytest.MonkeyPatch) -> None:
-    from fignet_gym.train.sim2real import _train_from
-
     trajs = cube_tosses(4, -9.6)
     train_file, valid_file = tmp_path / "train.h5", tmp_path / "valid.h5"
     write_trajectories(train_file, trajs[:3])
@@ -163,8 +161,8 @@ def test_sim2real_warm_start_raises_when_interrupted(tmp_path: Path,
     original = Trainer.run
     monkeypatch.setattr(Trainer, "run", lambda self, stop_after=None: original(self, stop_after=2))
     with pytest.raises(TrainingInterrupted, match="interrupted at step 2 of 4"):
-        _train_from(str(init), train_file, valid_file, 2, out, "cube-real", 4, TINY)
+        train_on_split(train_file, valid_file, 2, out, 4, overrides=TINY, init=str(init))
     assert not (out / "done.json").exists()
     monkeypatch.setattr(Trainer, "run", original)  # called again: resumes and finishes
-    assert _train_from(str(init), train_file, valid_file, 2, out, "cube-real", 4, TINY).is_file()
+    assert train_on_split(train_file, valid_file, 2, out, 4, overrides=TINY, init=str(init)).is_file()
     assert json.loads((out / "done.json").read_text())["step"] == 4

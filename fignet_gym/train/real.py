@@ -109,6 +109,7 @@ def train_on_split(
     config: str = "cube-real",
     overrides: dict[str, Any] | None = None,
     seed: int = 0,
+    init: str | None = None,
 ) -> Path:
     """Train a simulator on the first ``size`` training trajectories; return its best checkpoint.
 
@@ -123,12 +124,16 @@ def train_on_split(
         config: preset or JSON config file (default ``cube-real``); ``overrides`` as for
             ``fignet-gym train --set``.
         seed: seed of initialisation, sampling and noise.
+        init: fine-tune this checkpoint (a file or a pretrained name) instead of starting from
+            scratch; its recipe's gravity prior is kept (its learned accelerations are residuals
+            of that prior), and a resumed run continues its own ``last.pt``.
 
     Raises :class:`TrainingInterrupted` if the run was stopped before its last step (its
     ``last.pt`` is written: calling again resumes it exactly).
 
-    The gravity prior is measured on the training subset (:func:`free_flight_gravity`) unless
-    ``overrides`` sets ``simulator.gravity``. Returns ``out_dir / "best.pt"``.
+    The gravity prior of a run from scratch is measured on the training subset
+    (:func:`free_flight_gravity`) unless ``overrides`` sets ``simulator.gravity``. Returns
+    ``out_dir / "best.pt"``.
     """
     from fignet_gym.train.rundir import check_resume_config
     from fignet_gym.train.training import Trainer, load_run_config
@@ -151,8 +156,8 @@ def train_on_split(
     # Validate ~12 times per run whatever its length: early stopping needs points to choose
     # from, and a validation (80 full-length rollouts plus one-step errors) costs about as much
     # CPU as 500 training steps.
-    sets.setdefault("training.valid_every", max(100, steps // 12))
-    if "simulator.gravity" not in sets:
+    sets.setdefault("training.valid_every", max(25, steps // 12))
+    if init is None and "simulator.gravity" not in sets:
         sets["simulator.gravity"] = (0.0, 0.0, free_flight_gravity(trajs))
     sim_cfg, cfg = load_run_config(config, sets)
     # A run left in ``out`` (finished or not) is only reused when it is the run asked for: a
@@ -164,7 +169,7 @@ def train_on_split(
     (out / "split.json").write_text(json.dumps(
         {"train": [t.name for t in trajs], "valid": [t.name for t in valid_trajs],
          "gravity": list(sim_cfg["gravity"]), "steps": cfg.steps}, indent=1))
-    trainer = Trainer(sim_cfg, cfg, trajs, valid_trajs, out, resume=True)
+    trainer = Trainer(sim_cfg, cfg, trajs, valid_trajs, out, resume=True, init=init)
     state = trainer.run()
     if state.step < cfg.steps:  # SIGINT / SIGTERM: last.pt is written, a new call resumes
         raise TrainingInterrupted(f"{out}: training interrupted at step {state.step} of "

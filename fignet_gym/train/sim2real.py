@@ -34,7 +34,6 @@ import math
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -68,57 +67,17 @@ class Sim2RealError(ValueError):
 
 def default_train(config: str = "cube-real", budget: int | None = None,
                   overrides: dict[str, Any] | None = None, init: str | None = None) -> TrainFn:
-    """The FIGNet training step: h14learn's recipe, ``train_on_split`` (``config``, ``budget``
-    optimiser steps or its size-dependent default), or a warm start from ``init`` (a checkpoint
-    or pretrained name) with the same selection on validation."""
+    """The FIGNet training step: ``train_on_split`` with ``config`` and ``budget`` optimiser
+    steps (or its size-dependent default), from scratch or warm-started from ``init`` (a
+    checkpoint or pretrained name), selected on validation either way."""
 
     def train(train_file: Path, valid_file: Path, size: int | None, out_dir: Path) -> Path:
         from fignet_gym.train.real import train_on_split
 
-        if init is None:
-            return train_on_split(train_file, valid_file, size, out_dir, budget, config=config,
-                                  overrides=overrides)
-        return _train_from(init, train_file, valid_file, size, out_dir, config, budget, overrides)
+        return train_on_split(train_file, valid_file, size, out_dir, budget, config=config,
+                              overrides=overrides, init=init)
 
     return train
-
-
-def _train_from(init: str, train_file: Path, valid_file: Path, size: int | None, out_dir: Path,
-                config: str, budget: int | None, overrides: dict[str, Any] | None) -> Path:
-    """Fine-tune ``init`` on the first ``size`` training trajectories (resumable)."""
-    from fignet_gym.data.format import load_trajectories
-    from fignet_gym.train.real import (
-        UNROLL_AFTER_FRACTION,
-        TrainingInterrupted,
-        default_steps,
-        finished_run,
-    )
-    from fignet_gym.train.rundir import check_resume_config
-    from fignet_gym.train.training import Trainer, load_run_config
-
-    trajs = load_trajectories(train_file)
-    trajs = trajs[:size] if size is not None else trajs
-    best, done = out_dir / "best.pt", out_dir / "done.json"
-    sets = {"training.threads": 1, **(overrides or {})}
-    steps = int(budget or default_steps(len(trajs)))
-    sets.setdefault("training.steps", steps)
-    sets.setdefault("training.unroll_after", int(steps * UNROLL_AFTER_FRACTION))
-    sets.setdefault("training.valid_every", max(25, steps // 12))
-    sim_cfg, cfg = load_run_config(config, sets)
-    check_resume_config(out_dir, sim_cfg, asdict(cfg))  # reuse only the run asked for
-    if done.is_file() and best.is_file():
-        return finished_run(done, best, cfg.steps)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    resume = (out_dir / "last.pt").is_file()
-    trainer = Trainer(sim_cfg, cfg, trajs, load_trajectories(valid_file), out_dir, resume=resume,
-                      init=None if resume else init)
-    state = trainer.run()
-    if state.step < cfg.steps:  # SIGINT / SIGTERM: last.pt is written, a new call resumes
-        raise TrainingInterrupted(f"{out_dir}: training interrupted at step {state.step} of "
-                                  f"{cfg.steps}; call again to resume")
-    if best.is_file():
-        done.write_text(json.dumps({"step": state.step, "cpu_hours": state.cpu_seconds / 3600}))
-    return best
 
 
 def _read(path: Path) -> dict[str, Any] | None:
@@ -168,13 +127,15 @@ def run_sim2real(
     *, fractions: Sequence[float] = DEFAULT_FRACTIONS, seed: int = 0, horizon: int = 50,
     given: int = 3, resume: bool = False, fit_evaluations: int = 240, fit_trajectories: int = 64,
     train_fn: TrainFn | None = None, fignet: bool = True, base_params: Any = None,
-    pretrain: int = 0, config: str = "cube-real", overrides: dict[str, Any] | None = None,
+    pretrain: int = 0, config: str = "cube-real", budget: int | None = None,
+    overrides: dict[str, Any] | None = None, init: str | None = None,
 ) -> dict[str, Any]:
     """Run every stage (see the module docstring) and return the results dict.
 
-    ``pretrain``: synthetic tosses to pretrain on (0: none). ``config`` and ``overrides`` are the
-    pretraining's recipe; ``train_fn`` trains each size (default: :func:`default_train`, which
-    with ``pretrain`` fine-tunes :func:`pretrain_checkpoint`).
+    ``pretrain``: synthetic tosses to pretrain on (0: none). ``train_fn`` trains each size;
+    by default :func:`default_train` with ``config``, ``budget``, ``overrides`` and ``init``, or
+    with ``pretrain`` a fine-tuning of :func:`pretrain_checkpoint` (:data:`FINETUNE_OVERRIDES`).
+    ``config`` and ``overrides`` are also the pretraining's recipe.
     """
     from fignet_gym.data.format import load_trajectories
     from fignet_gym.train.analytic import ContactParams
@@ -182,6 +143,8 @@ def run_sim2real(
     from fignet_gym.train.sysid import env_parameters, fit_contact_params
 
     out = Path(out)
+    if pretrain and init is not None:
+        raise Sim2RealError("--pretrain and --init both choose where FIGNet starts: pass one")
     results_path = out / "results.json"
     if out.exists() and any(out.iterdir()) and not resume:
         raise Sim2RealError(f"{out}: already holds a sim2real run (pass --resume to continue it, "
@@ -241,9 +204,9 @@ def run_sim2real(
     learned: dict[str, Any] = {}
     if fignet:
         if train_fn is None:
-            train_fn = (default_train(config, None, {**FINETUNE_OVERRIDES, **(overrides or {})},
+            train_fn = (default_train(config, budget, {**FINETUNE_OVERRIDES, **(overrides or {})},
                                       init=str(pretrain_checkpoint(out))) if pretrain
-                        else default_train(config, None, overrides))
+                        else default_train(config, budget, overrides, init))
         for size in sizes:
             label = _size_label(size)
             path = out / f"fignet_{label}.json"

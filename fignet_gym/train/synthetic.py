@@ -26,7 +26,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from fignet_gym.data.format import Trajectory, build_scene
+from fignet_gym.data.format import Trajectory
 from fignet_gym.data.generate import random_quaternion
 from fignet_gym.dynamics.base import Dynamics
 from fignet_gym.simulator.scene import ObjectKind
@@ -81,7 +81,7 @@ def check_tosses(trajs: Sequence[Trajectory], clearance: float = 0.01) -> None:
         if (np.asarray(t.kinds) == int(ObjectKind.KINEMATIC)).any():
             raise ValueError(f"{where} has kinematic objects (a pusher?): synthetic pretraining "
                              "varies the release of tosses, not pushes")
-        scene = build_scene(t)
+        scene = t.scene
         dyn = scene.dynamic_mask[scene.node_object]
         low = float(scene.node_positions(torch.as_tensor(t.poses[1:2], dtype=torch.float32))[0, dyn, 2].min())
         if low <= clearance:
@@ -112,7 +112,8 @@ def synthetic_tosses(
     p = perturbation
     dynamics = dynamics or MujocoDynamics(nthread=1)
     rng = np.random.default_rng(seed)
-    scenes = [build_scene(t) for t in trajs]
+    # Gravity of the fitted model (the MJCF's where the fit leaves it), once per source.
+    gravity = [Replay(t).model(params).opt.gravity.copy() for t in trajs]
     out: list[Trajectory] = []
     bar = tqdm(total=num, desc="synthetic tosses", unit="toss", disable=not progress)
     draws = 0
@@ -123,10 +124,9 @@ def synthetic_tosses(
                              f"{p.clearance} m: release the sources higher or turn off "
                              "random_orientation")
         i = int(rng.integers(len(trajs)))
-        src, scene = trajs[i], scenes[i]
+        src, scene, g = trajs[i], trajs[i].scene, gravity[i]
         poses = np.asarray(src.poses, np.float64).copy()
         dt = src.dt
-        g = Replay(src).model(params).opt.gravity.copy()  # the fit's, else the MJCF's
         dyn = [o for o, k in enumerate(src.kinds) if k == int(ObjectKind.DYNAMIC)]
         for o in dyn:
             p1 = poses[1, o, :3].copy()
