@@ -77,6 +77,10 @@ class TrainConfig:
         unroll_after: optimiser steps of plain one-step training before pushforward begins: an
             untrained model's own rollouts are junk states to learn from.
         rotate_z: random rotation of each window about the vertical axis.
+        mirror: reflect half of the windows in the vertical plane y = 0 (:func:`mirror_y`), which
+            is physical only when every object's mesh and centre of mass are symmetric under its
+            own body-frame y -> -y (a box, a cylinder; the trainer refuses other scenes) and
+            friction is isotropic.
         valid_every: steps between validation rollouts; valid_trajectories: how many;
             valid_horizon: the step at which errors are scored (``best.pt`` has the lowest sum of
             translation and rotation errors relative to the no-motion model there).
@@ -104,6 +108,7 @@ class TrainConfig:
     unroll_steps: int = 0
     unroll_after: int = 0
     rotate_z: bool = True
+    mirror: bool = False
     valid_every: int = 1000
     valid_trajectories: int = 8
     valid_horizon: int = 50
@@ -310,6 +315,33 @@ def rotate_about_z(poses: Tensor, angle: float) -> Tensor:
     return torch.cat((poses[..., :3] @ rot.T, quat_mul(qz.expand_as(poses[..., 3:]), poses[..., 3:])), -1)
 
 
+def mirror_y(poses: Tensor) -> Tensor:
+    """Reflect whole-scene poses ``float[..., O, 7]`` in the world plane ``y = 0``.
+
+    With ``M = diag(1, -1, 1)`` a pose ``(p, R)`` becomes ``(M p, M R M)``, i.e. quaternion
+    ``(w, x, y, z) -> (w, -x, y, -z)``. For an object symmetric under its body-frame ``M``
+    (:func:`mirror_asymmetric`), the posed mesh is the mirror image of the original one, so a
+    reflected trajectory is the mirror image of a physical one.
+    """
+    sign = poses.new_tensor([1.0, -1.0, 1.0, 1.0, -1.0, 1.0, -1.0])
+    return poses * sign
+
+
+def mirror_asymmetric(scene: Scene, tol: float = 1e-4) -> list[str]:
+    """Names of the objects of ``scene`` whose body-frame mesh or centre of mass is not symmetric
+    under ``y -> -y`` (within ``tol`` times the object's size): :func:`mirror_y` would turn them
+    into shapes that do not exist."""
+    bad = []
+    for o, name in enumerate(scene.object_names):
+        v = scene.ref_vertices[scene.node_object == o].double()
+        size = float((v.amax(0) - v.amin(0)).norm()) or 1.0
+        flipped = v * v.new_tensor([1.0, -1.0, 1.0])
+        gap = torch.cdist(flipped, v).amin(dim=1).max() if v.numel() else v.new_zeros(())
+        if float(gap) > tol * size or abs(float(scene.object_com[o, 1])) > tol * size:
+            bad.append(name)
+    return bad
+
+
 # ----------------------------------------------------------------------------- trainer
 def _face_columns(config: SimulatorConfig) -> list[tuple[str, int]]:
     """Face-feature columns of ``config`` as ``(group, index within group)``, in layout order."""
@@ -400,6 +432,12 @@ class Trainer:
         config, blob = self._config(sim_cfg, resume)
         self.train_scenes = [build_scene(t, config.mesh_options) for t in train]
         self.valid_scenes = [build_scene(t, config.mesh_options) for t in valid]
+        if cfg.mirror:
+            for traj, scene in zip(train, self.train_scenes, strict=True):
+                if bad := mirror_asymmetric(scene):
+                    raise ValueError(f"training.mirror: object '{bad[0]}' of trajectory "
+                                     f"'{traj.name}' is not symmetric under its body-frame "
+                                     f"y -> -y, so its mirrored motion is not physical")
         if config.noise_std <= 0 and cfg.noise_fraction > 0:
             scale = median_node_acceleration(train, self.train_scenes)
             config = replace(config, noise_std=cfg.noise_fraction * scale)
@@ -513,6 +551,8 @@ class Trainer:
             if self.cfg.rotate_z:
                 angle = float(torch.rand((), generator=self.gen, device=self.device)) * 2 * math.pi
                 p = rotate_about_z(p, angle)
+            if self.cfg.mirror and float(torch.rand((), generator=self.gen, device=self.device)) < 0.5:
+                p = mirror_y(p)
             scenes.append(self.train_scenes[i])
             poses.append(p)
         return Scene.batch(scenes).to(self.device), torch.cat(poses, dim=1).to(self.device)
