@@ -79,6 +79,21 @@ def test_large_batches_and_chunks_equal_the_scene_alone(push_sim, monkeypatch) -
     assert torch.equal(chunked.view(count, -1, 7), big)
 
 
+def test_narrow_products_round_as_inside_a_larger_one_on_this_cpu() -> None:
+    """The assumption behind MIN_ROWS, checked on the machine the suite runs on: any number of
+    rows, padded by ``networks.linear``, gets the bits those rows get inside a large product, for
+    the layer widths the network uses (edge first layers reach 9 latents plus features)."""
+    gen = torch.Generator().manual_seed(0)
+    with torch.no_grad():
+        for k in (3, 16, 64, 192, 320, 576, 640):
+            for out in (3, 64, 192):
+                w, b = torch.randn(out, k, generator=gen), torch.randn(out, generator=gen)
+                x = torch.randn(3 * networks.MIN_ROWS, k, generator=gen)
+                inside = torch.nn.functional.linear(torch.cat((x, x, x)), w, b)
+                for m in range(1, x.shape[0] + 1):
+                    assert torch.equal(networks.linear(x[:m], w, b), inside[:m]), (k, out, m)
+
+
 @pytest.mark.skipif(not networks._ONEDNN, reason="no oneDNN in this torch build")
 def test_fused_linear_rounds_like_plain_linear() -> None:
     """The assumption behind FUSED_MAX_IN: on this build oneDNN's fused linear (+ReLU) gives

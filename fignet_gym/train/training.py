@@ -437,7 +437,8 @@ class Trainer:
                 if bad := mirror_asymmetric(scene):
                     raise ValueError(f"training.mirror: object '{bad[0]}' of trajectory "
                                      f"'{traj.name}' is not symmetric under its body-frame "
-                                     f"y -> -y, so its mirrored motion is not physical")
+                                     f"y -> -y, so its mirrored motion is not physical (set "
+                                     f"training.mirror to false)")
         if config.noise_std <= 0 and cfg.noise_fraction > 0:
             scale = median_node_acceleration(train, self.train_scenes)
             config = replace(config, noise_std=cfg.noise_fraction * scale)
