@@ -16,6 +16,7 @@ from fignet_gym.data.format import Trajectory, write_trajectories
 from fignet_gym.envs.cube_toss import DATA_DT, cube_toss_xml, mujoco_parameters
 from fignet_gym.pretrained import load_pretrained
 from fignet_gym.simulator.model import LearnedSimulator
+from fignet_gym.simulator.normalization import Normalizer
 from fignet_gym.simulator.scene import Scene
 from fignet_gym.train.real import (
     TrainingInterrupted,
@@ -119,6 +120,13 @@ def test_init_accepts_a_pretrained_name(tmp_path: Path) -> None:
 def test_a_warm_start_is_validated_before_its_first_step_and_can_stay_best(tmp_path: Path) -> None:
     trajs = cube_tosses(4, -9.6)
     base = train_on_split(trajs[:2], trajs[3:], None, tmp_path / "base", budget=4, overrides=TINY)
+    # Saturate the start's normalisers, as a trained model's are: otherwise fine-tuning batches
+    # still move their statistics, and with them the model, whatever the learning rate.
+    start_sim = LearnedSimulator.load(base)
+    for module in start_sim.modules():
+        if isinstance(module, Normalizer):
+            module.calls.fill_(module.max_accumulations)
+    start_sim.save(base)
     sim_cfg, cfg = load_run_config("cube-real", {**TINY, "training.steps": 2, "training.lr": 1e-12,
                                                  "training.lr_final": 1e-12})
     trainer = Trainer(sim_cfg, cfg, trajs[:2], trajs[3:], tmp_path / "ft", init=str(base))
