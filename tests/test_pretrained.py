@@ -28,6 +28,9 @@ def test_presets_are_the_shipped_models_recipes(preset: str, name: str) -> None:
     for key, value in PRESETS[preset]["simulator"].items():
         if key == "mesh_options":
             assert all(shipped[key][k] == v for k, v in value.items())
+        elif key == "gravity" and preset == "cube-real":
+            # train_on_split measures gravity on the tosses it trains on; the preset rounds it.
+            assert shipped[key] == pytest.approx(value, abs=5e-3), key
         else:
             assert shipped[key] == value, key
 

@@ -97,7 +97,8 @@ Mesh options: {c.mesh_options}.
   per-step acceleration of moving nodes in the held-out data, {m["median_node_acceleration"]:.2g} m);
   rotational noise std {c.rotation_noise_std or "(from the position noise)"} rad; pushforward unrolls
   of up to {tr.get("unroll_steps", 0)} steps (from step {tr.get("unroll_after", 0)});
-  random rotations about z; Adam, lr {tr.get("lr")} decaying to {tr.get("lr_final")};
+  random rotations about z{"; half of the windows mirrored in y = 0" if tr.get("mirror") else ""};
+  Adam, lr {tr.get("lr")} decaying to {tr.get("lr_final")};
   weight average (EMA) decay {tr.get("ema_decay", 0)}.
 {notes.rstrip()}
 
