@@ -121,8 +121,7 @@ def test_a_mirrored_toss_is_what_mujoco_simulates_from_the_mirrored_start() -> N
     assert np.abs(toss[:, :3] - mirrored[:, :3]).max() > 0.05
 
 
-def test_mirror_training_refuses_objects_that_are_not_mirror_symmetric(push_file: Path,
-                                                                       tmp_path: Path) -> None:
+def test_mirror_training_refuses_objects_that_are_not_mirror_symmetric(tmp_path: Path) -> None:
     from fignet_gym.data.format import build_scene
 
     trajs = list(iter_trajectories("push", 6, seed=7))
