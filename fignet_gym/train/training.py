@@ -338,7 +338,7 @@ def mirror_asymmetric(scene: Scene, tol: float = 1e-4) -> list[str]:
         v = scene.ref_vertices[scene.node_object == o].double()
         size = float((v.amax(0) - v.amin(0)).norm()) or 1.0
         flipped = v * v.new_tensor([1.0, -1.0, 1.0])
-        gap = torch.cdist(flipped, v).amin(dim=1).max() if v.numel() else v.new_zeros(())
+        gap = torch.cdist(flipped, v).amin(dim=1).max()  # Scene refuses empty meshes
         if float(gap) > tol * size or abs(float(scene.object_com[o, 1])) > tol * size:
             bad.append(name)
     return bad
