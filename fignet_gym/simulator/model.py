@@ -26,6 +26,7 @@ from fignet_gym.simulator.collision import (
 from fignet_gym.simulator.geometry import (
     axis_angle_to_quat,
     kabsch,
+    polar_fit,
     quat_mul,
     quat_normalize,
     quat_rotate,
@@ -302,14 +303,30 @@ class LearnedSimulator(nn.Module):
         # by out-of-place ops below, so no inference tensor escapes.
         with torch.inference_mode():
             acc = self.predict_acceleration(inputs.graph)
-        x_t, x_prev = inputs.node_hist[-1], inputs.node_hist[-2]
-        pred = 2 * x_t - x_prev + acc
-        dyn = scene.dynamic_mask
-        # Non-dynamic nodes take their given positions so their (ignored) fit is well posed.
-        pred = torch.where(dyn[scene.node_object][:, None], pred, inputs.node_next)
+        pred = self._next_nodes(scene, inputs, acc)
         poses, residual = kabsch(scene.ref_vertices, pred, scene.node_object, scene.num_objects)
-        out = torch.where(dyn[:, None], poses, next_kinematic)
+        out = torch.where(scene.dynamic_mask[:, None], poses, next_kinematic)
         return out, inputs, residual
+
+    def differentiable_step(self, scene: Scene, history: Tensor, next_kinematic: Tensor) -> Tensor:
+        """:meth:`step` with gradients, for training through rollouts: the same prediction (in
+        float32, normalisers fixed), shape matched by :func:`polar_fit`, which agrees with Kabsch
+        to rounding but is differentiable for symmetric objects too. ``float[H, O, 7]``,
+        ``float[O, 7]`` -> ``float[O, 7]``."""
+        inputs = self.build_inputs(scene, history, next_kinematic)
+        pred = self._next_nodes(scene, inputs, self.predict_acceleration(inputs.graph))
+        poses = polar_fit(scene.ref_vertices, pred, scene.node_object, scene.num_objects,
+                          scene.dynamic_mask)
+        return torch.where(scene.dynamic_mask[:, None], poses, next_kinematic)
+
+    @staticmethod
+    def _next_nodes(scene: Scene, inputs: StepInputs, acc: Tensor) -> Tensor:
+        """Node positions ``float[N, 3]`` one step on: Verlet with the accelerations ``acc``
+        on dynamic nodes; non-dynamic nodes take their given positions so that their (ignored)
+        fit is well posed."""
+        x_t, x_prev = inputs.node_hist[-1], inputs.node_hist[-2]
+        dyn = scene.dynamic_mask[scene.node_object][:, None]
+        return torch.where(dyn, 2 * x_t - x_prev + acc, inputs.node_next)
 
     @torch.no_grad()
     def rollout(self, scene: Scene, history: Tensor, kinematic: Tensor) -> Tensor:

@@ -125,7 +125,7 @@ def train_on_split(
             ``fignet-gym train --set``.
         seed: seed of initialisation, sampling and noise.
         init: fine-tune this checkpoint (a file or a pretrained name) instead of starting from
-            scratch; its recipe's gravity prior is kept (its learned accelerations are residuals
+            scratch; its gravity prior is kept (its learned accelerations are residuals
             of that prior), and a resumed run continues its own ``last.pt``.
 
     Raises :class:`TrainingInterrupted` if the run was stopped before its last step (its
@@ -135,6 +135,7 @@ def train_on_split(
     (:func:`free_flight_gravity`) unless ``overrides`` sets ``simulator.gravity``. Returns
     ``out_dir / "best.pt"``.
     """
+    from fignet_gym.pretrained import load_checkpoint
     from fignet_gym.train.rundir import check_resume_config
     from fignet_gym.train.training import Trainer, load_run_config
 
@@ -157,8 +158,11 @@ def train_on_split(
     # from, and a validation (80 full-length rollouts plus one-step errors) costs about as much
     # CPU as 500 training steps.
     sets.setdefault("training.valid_every", max(25, steps // 12))
-    if init is None and "simulator.gravity" not in sets:
-        sets["simulator.gravity"] = (0.0, 0.0, free_flight_gravity(trajs))
+    if "simulator.gravity" not in sets:
+        # A fine-tuned model's accelerations are residuals of its own prior: a prior rounded
+        # differently (the preset's -9.61 against a measured -9.612) already moves its rollouts.
+        sets["simulator.gravity"] = (load_checkpoint(init).config.gravity if init is not None
+                                     else (0.0, 0.0, free_flight_gravity(trajs)))
     sim_cfg, cfg = load_run_config(config, sets)
     # A run left in ``out`` (finished or not) is only reused when it is the run asked for: a
     # changed budget or recipe must not return stale results.

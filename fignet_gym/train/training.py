@@ -74,8 +74,16 @@ class TrainConfig:
             (``k`` uniform in ``0..unroll_steps``, no gradient) from noisy inputs, then is
             supervised on the next step from its own predicted history, so that it learns to
             correct the errors it really makes, not only synthetic noise.
-        unroll_after: optimiser steps of plain one-step training before pushforward begins: an
-            untrained model's own rollouts are junk states to learn from.
+        unroll_after: optimiser steps of plain one-step training before pushforward (and the
+            rollout loss) begin: an untrained model's own rollouts are junk states to learn from.
+        rollout_steps: training through rollouts: each batch also rolls the model out for this
+            many steps with gradients (:meth:`LearnedSimulator.differentiable_step`, after any
+            pushforward) and adds ``rollout_weight`` times the mean squared node position error
+            of step ``j`` divided by ``j`` (so that an acceleration error carried since the first
+            step weighs as much as in the one-step loss), normalised like the one-step loss.
+            Errors that are small per step but add up, such as a few percent of excess impulse at
+            an impact, are what it supervises. 0: off. Windows are then weighted by the largest
+            acceleration among the rollout's targets.
         rotate_z: random rotation of each window about the vertical axis.
         mirror: reflect half of the windows in the vertical plane y = 0 (:func:`mirror_y`), which
             is physical only when every object's mesh and centre of mass are symmetric under its
@@ -107,6 +115,8 @@ class TrainConfig:
     rigid_loss_weight: float = 1.0
     unroll_steps: int = 0
     unroll_after: int = 0
+    rollout_steps: int = 0
+    rollout_weight: float = 1.0
     rotate_z: bool = True
     mirror: bool = False
     valid_every: int = 1000
@@ -275,8 +285,10 @@ class WindowSampler:
 
     def __init__(self, trajs: list[Trajectory], scenes: list[Scene], history: int,
                  still_weight: float, seed: int, accel_cap: float = 10.0, unroll: int = 0,
-                 near: int = 0, near_weight: float = 1.0) -> None:
+                 near: int = 0, near_weight: float = 1.0, targets: int = 1) -> None:
         self.trajs, self.scenes, self.span = trajs, scenes, history + 2 + unroll
+        if not 1 <= targets <= unroll + 1:
+            raise ValueError(f"targets must be in 1..{unroll + 1}, got {targets}")
         index, weight, accel = [], [], []
         for i, (traj, scene) in enumerate(zip(trajs, scenes, strict=True)):
             poses = traj.poses
@@ -285,8 +297,9 @@ class WindowSampler:
             acc = node_accelerations(traj, scene).norm(dim=-1).amax(dim=-1).numpy()  # [T-2]
             for t in range(poses.shape[0] - self.span + 1):
                 index.append((i, t))
-                # The target acceleration of window t is at pose t + span - 2 (index into acc).
-                accel.append(float(acc[t + self.span - 3]))
+                # The acceleration of target pose p is acc[p - 2]; the last target is t + span - 1.
+                end_acc = t + self.span - 2
+                accel.append(float(acc[end_acc - targets:end_acc].max()))
                 end = t + self.span - 1
                 if moved[t:end].any():
                     weight.append(-1.0)
@@ -489,8 +502,9 @@ class Trainer:
         self.state = TrainState()
         seed = cfg.seed + 1000 * self.rank  # each process draws different windows and noise
         self.sampler = WindowSampler(self.train, self.train_scenes, config.history, cfg.still_weight, seed,
-                                     unroll=cfg.unroll_steps, near=cfg.near_motion_poses,
-                                     near_weight=cfg.near_motion_weight)
+                                     unroll=cfg.unroll_steps + max(cfg.rollout_steps - 1, 0),
+                                     near=cfg.near_motion_poses, near_weight=cfg.near_motion_weight,
+                                     targets=max(cfg.rollout_steps, 1))
         self.gen = torch.Generator(device=self.device).manual_seed(seed)
 
     def _resume(self, blob: dict[str, Any]) -> None:
@@ -584,10 +598,31 @@ class Trainer:
 
     def loss(self, scene: Scene, poses: Tensor) -> Tensor:
         """The simulator's loss (:meth:`LearnedSimulator.loss`) on a window from :meth:`batch`
-        (``poses float[H + 1 + unroll_steps, O, 7]``), after pushforward if configured."""
+        (``poses float[H + 1 + unroll_steps + max(rollout_steps - 1, 0), O, 7]``), after
+        pushforward if configured, plus the rollout loss (:meth:`rollout_loss`) if configured."""
         poses, inputs = self.pushforward(scene, poses)
-        example = self.sim.training_example(scene, poses, self.gen, inputs)
-        return self.sim.loss(example, self.cfg.rigid_loss_weight)
+        H = self.sim.config.history + 1
+        example = self.sim.training_example(scene, poses[:H + 1], self.gen, inputs)
+        loss = self.sim.loss(example, self.cfg.rigid_loss_weight)
+        if self.cfg.rollout_steps > 0 and self.state.step >= self.cfg.unroll_after:
+            loss = loss + self.cfg.rollout_weight * self.rollout_loss(scene, poses, inputs)
+        return loss
+
+    def rollout_loss(self, scene: Scene, poses: Tensor, inputs: Tensor | None) -> Tensor:
+        """Node position errors of a rollout with gradients (``TrainConfig.rollout_steps``):
+        from ``inputs float[H, O, 7]`` (pushforward's history) or the noisy first ``H`` rows of
+        ``poses float[H + R, O, 7]`` (true poses), against their last ``R`` rows. Scalar."""
+        H, R = self.sim.config.history + 1, self.cfg.rollout_steps
+        hist = inputs if inputs is not None else self.sim.pose_noise(scene, poses[:H], self.gen)
+        dyn = scene.dynamic_mask[scene.node_object]
+        terms = []
+        for j in range(R):
+            nxt = self.sim.differentiable_step(scene, hist, poses[H + j])
+            err = scene.node_positions(nxt)[dyn] - scene.node_positions(poses[H + j])[dyn]
+            terms.append(err.pow(2).mean() / (j + 1) ** 2)
+            hist = torch.cat((hist[1:], nxt[None]), 0)
+        scale = self.sim.target_norm.std.mean().to(poses.dtype)
+        return torch.stack(terms).mean() / scale**2
 
     # -------------------------------------------------------------- loop
     def run(self, stop_after: int | None = None) -> TrainState:
