@@ -81,6 +81,15 @@ class Graph:
             "world": lambda: self.node_edges.features,
         }[name]()
 
+    def cast(self, dtype: torch.dtype) -> Graph:
+        """The same graph with every feature tensor in ``dtype`` (positions and indices kept)."""
+        return self.with_features(
+            node_features=self.node_features.to(dtype), object_features=self.object_features.to(dtype),
+            obj_mesh_features=self.obj_mesh_features.to(dtype),
+            mesh_obj_features=self.mesh_obj_features.to(dtype),
+            mesh=self.mesh_edges.features.to(dtype), face=self.face_edges.features.to(dtype),
+            world=self.node_edges.features.to(dtype))
+
     def with_features(self, **feats: Tensor) -> Graph:
         """The same topology with some feature tensors replaced (used for normalisation)."""
         fields = dict(self.__dict__)

@@ -8,6 +8,7 @@ into rigid poses.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
@@ -205,9 +206,11 @@ class LearnedSimulator(nn.Module):
         self.norms["mesh_obj"] = Normalizer(sizes["obj_mesh"])
         self.target_norm = Normalizer(3)
         # Precision of the network at inference (not a config field: it changes no parameter and
-        # is not saved). torch.bfloat16 runs matmuls under CPU autocast, about twice as fast on
-        # CPUs with AVX-512 BF16 or AMX, at a relative error of ~1e-2 in the accelerations.
+        # is not saved). torch.bfloat16 runs a bfloat16 copy of the whole network (matmuls,
+        # LayerNorms, sums), 1.4-2.4x faster per batched scene on CPUs with AVX-512 BF16 or AMX,
+        # at a relative error of ~1e-2 in the accelerations (docs/experiments.md, Issue 17).
         self.inference_dtype: torch.dtype = torch.float32
+        self._low_precision: tuple[tuple, nn.Module] | None = None
 
     @property
     def device(self) -> torch.device:
@@ -263,10 +266,19 @@ class LearnedSimulator(nn.Module):
         if self.inference_dtype == torch.float32:
             out = self.net(graph)
         else:
-            with torch.autocast(self.device.type, dtype=self.inference_dtype):
-                out = self.net(graph).float()
+            out = self._low_precision_net()(graph.cast(self.inference_dtype)).float()
         acc = self._rigid(self.target_norm.inverse(out), graph)
         return acc + self.gravity_step()
+
+    def _low_precision_net(self) -> nn.Module:
+        """The network in ``inference_dtype``, copied again whenever a parameter has changed
+        (an optimiser step, a loaded state, a move to another device)."""
+        key = (self.inference_dtype, *((p.data_ptr(), _version(p)) for p in self.net.parameters()))
+        if self._low_precision is None or self._low_precision[0] != key:
+            with torch.no_grad():
+                net = copy.deepcopy(self.net).to(self.inference_dtype).requires_grad_(False)
+            self._low_precision = (key, net)
+        return self._low_precision[1]
 
     def _rigid(self, acc: Tensor, graph: Graph) -> Tensor:
         """Accelerations ``float[N, 3]`` (m per step^2) projected per object if ``rigid_output``."""
@@ -482,6 +494,11 @@ class LearnedSimulator(nn.Module):
         stale = (last + "mesh_obj.", last + "obj_node.")
         own = self.state_dict()
         return {k: v for k, v in state.items() if k in own or not k.startswith(stale)}
+
+
+def _version(t: Tensor) -> int:
+    """``t``'s in-place update counter (inference tensors have none and never change)."""
+    return -1 if t.is_inference() else t._version
 
 
 def rigid_terms(pos: Tensor, acc: Tensor, node_object: Tensor, num_objects: int) -> tuple[Tensor, Tensor]:

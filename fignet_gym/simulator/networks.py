@@ -24,7 +24,6 @@ product.
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass
 
 import torch
@@ -49,55 +48,16 @@ FUSED_MIN_ROWS, FUSED_MAX_IN = 4096, 192
 
 
 def _fused_ok(x: Tensor, w: Tensor) -> bool:
-    """Whether oneDNN's fused linear (+ReLU) kernel applies: large float32 CPU inference."""
+    """Whether oneDNN's fused linear (+ReLU) kernel applies: large float32 or bfloat16 CPU
+    inference."""
     return (_ONEDNN and x.shape[0] >= FUSED_MIN_ROWS and x.shape[-1] <= FUSED_MAX_IN
-            and w.shape[0] % 16 == 0
-            and x.device.type == "cpu" and x.dtype == w.dtype == torch.float32
+            and w.shape[0] % 16 == 0 and x.device.type == "cpu"
+            and x.dtype == w.dtype and x.dtype in (torch.float32, torch.bfloat16)
             and x.dim() == 2 and not torch.is_grad_enabled()
             and not torch.is_autocast_enabled("cpu"))
 
 
 _ONEDNN = torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_linear_pointwise")
-
-
-#: Fewest rows for the bf16 oneDNN kernel: below, its per-call cost exceeds autocast's path.
-BF16_MIN_ROWS = 1024
-
-
-def _bf16_ok(x: Tensor) -> bool:
-    """Whether the opt-in bf16 mode (CPU autocast to bfloat16) runs this product on oneDNN."""
-    return (_ONEDNN and x.device.type == "cpu" and x.dim() == 2 and x.shape[0] >= BF16_MIN_ROWS
-            and not torch.is_grad_enabled()
-            and torch.is_autocast_enabled("cpu")
-            and torch.get_autocast_dtype("cpu") == torch.bfloat16)
-
-
-#: ``id(parameter) -> (weakref, version, bf16 copy)`` for the bf16 mode.
-_BF16_COPIES: dict[int, tuple] = {}
-
-
-def _cacheable(t: Tensor | None) -> bool:
-    """A parameter whose in-place updates are counted (inference tensors keep no counter)."""
-    return isinstance(t, nn.Parameter) and not t.is_inference()
-
-
-def _bf16_weights(w: Tensor, b: Tensor | None) -> tuple[Tensor, Tensor | None]:
-    """``w`` and ``b`` in bfloat16; a parameter's copy is kept until the parameter changes.
-
-    Autocast casts on every call, which costs as much as the narrow products it speeds up.
-    Derived weights (slices, stacked blocks) are cast each call. The copies live in a table
-    beside the parameters (an attribute on them would be pickled into saved checkpoints).
-    """
-    bb = None if b is None else b.to(torch.bfloat16)
-    if not _cacheable(w):
-        return w.to(torch.bfloat16).contiguous(), bb
-    hit = _BF16_COPIES.get(id(w))
-    if hit is None or hit[0]() is not w or hit[1] != w._version:
-        if hit is None or hit[0]() is not w:
-            weakref.finalize(w, _BF16_COPIES.pop, id(w), None)
-        hit = (weakref.ref(w), w._version, w.detach().to(torch.bfloat16).contiguous())
-        _BF16_COPIES[id(w)] = hit
-    return hit[2], bb
 
 
 def linear(x: Tensor, w: Tensor, b: Tensor | None = None, relu: bool = False) -> Tensor:
@@ -112,11 +72,7 @@ def linear(x: Tensor, w: Tensor, b: Tensor | None = None, relu: bool = False) ->
     pad = 0 < m < MIN_ROWS
     if pad:
         x = F.pad(x, (0, 0, 0, MIN_ROWS - m))
-    if _bf16_ok(x):
-        wb, bb = _bf16_weights(w, b)
-        out = torch.ops.mkldnn._linear_pointwise(x.to(torch.bfloat16).contiguous(), wb, bb,
-                                                 "relu" if relu else "none", [], "")
-    elif _fused_ok(x, w):
+    if _fused_ok(x, w):
         out = torch.ops.mkldnn._linear_pointwise(x.contiguous(), w.contiguous(), b,
                                                  "relu" if relu else "none", [], "")
     else:
@@ -163,8 +119,6 @@ class MLP(nn.Module):
         ``pre`` is consumed: the ReLUs run in place (no extra allocation per layer; autograd is
         unaffected because no linear layer saves its output for backward). Layers are applied
         through the functional API: module calls cost as much as a small layer's arithmetic.
-        The LayerNorm runs in the parameters' precision even under bfloat16 autocast, so that
-        latents and their residual sums stay float32 and only matmul inputs are rounded.
         """
         x = pre
         layers = list(self.rest)
@@ -173,8 +127,7 @@ class MLP(nn.Module):
                 relu = i + 1 < len(layers) and isinstance(layers[i + 1], nn.ReLU)
                 x = linear(x, layer.weight, layer.bias, relu)
             elif isinstance(layer, nn.LayerNorm):
-                x = F.layer_norm(x.to(layer.weight.dtype), layer.normalized_shape, layer.weight,
-                                 layer.bias, layer.eps)
+                x = F.layer_norm(x, layer.normalized_shape, layer.weight, layer.bias, layer.eps)
             elif i == 0 or not isinstance(layers[i - 1], nn.Linear):  # else fused into the linear
                 x = x.relu_()
         return x
@@ -272,8 +225,8 @@ def edge_first_layer(first: nn.Linear, e: Tensor, v: Tensor, index: EdgeIndex) -
     g, t = index.gather_edges, index.table_edges
     pre_g = _gathered_first_layer(first, e.index_select(0, g), v, index.nodes.index_select(0, g))
     pre_t = _table_first_layer(first, e.index_select(0, t), v_t, index.table_rows)
-    out = pre_g.new_empty(e.shape[0], first.weight.shape[0])  # autocast may have made it bf16
-    return out.index_copy_(0, g, pre_g).index_copy_(0, t, pre_t.to(out.dtype))
+    out = pre_g.new_empty(e.shape[0], first.weight.shape[0])
+    return out.index_copy_(0, g, pre_g).index_copy_(0, t, pre_t)
 
 
 @dataclass(frozen=True)

@@ -105,11 +105,12 @@ def network_flops(sim: LearnedSimulator, scene: Scene, history: torch.Tensor
     return flops, [s for v in blocks.values() for s in v if s[0] > 0]
 
 
-def matmul_rate(shapes: list[Shape], repeats: int = 5) -> float:
-    """GFLOP/s of plain float32 ``torch.mm`` on exactly these ``(rows, in, out)`` shapes (the median
-    of ``repeats`` timings of all of them, CPU seconds of this process)."""
+def matmul_rate(shapes: list[Shape], repeats: int = 5, dtype: torch.dtype = torch.float32) -> float:
+    """GFLOP/s of plain ``torch.mm`` in ``dtype`` on exactly these ``(rows, in, out)`` shapes (the
+    median of ``repeats`` timings of all of them, CPU seconds of this process)."""
     gen = torch.Generator().manual_seed(0)
-    ops = [(torch.randn(r, a, generator=gen), torch.randn(a, b, generator=gen)) for r, a, b in shapes]
+    ops = [(torch.randn(r, a, generator=gen).to(dtype), torch.randn(a, b, generator=gen).to(dtype))
+           for r, a, b in shapes]
     total = sum(2.0 * r * a * b for r, a, b in shapes)
     times = []
     with torch.inference_mode():
