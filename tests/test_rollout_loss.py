@@ -14,7 +14,8 @@ from fignet_gym.train.training import Trainer, WindowSampler, load_run_config
 TINY = {"simulator.latent_size": 8, "simulator.message_passing_steps": 1,
         "training.batch_size": 2, "training.steps": 6, "training.valid_every": 100,
         "training.valid_trajectories": 1, "training.threads": 1}
-CUBE = torch.tensor([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=torch.float64) * 0.05
+CUBE = 0.05 * torch.tensor([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)],
+                           dtype=torch.float64)
 
 
 @pytest.fixture(scope="module")
@@ -38,14 +39,16 @@ def test_polar_fit_is_kabsch_with_gradients_for_symmetric_objects() -> None:
     ref = torch.cat((CUBE, cloud, floor))
     seg = torch.tensor([0] * 8 + [1] * 30 + [2] * 4)
     poses = torch.stack([_random_pose(gen) for _ in range(3)])
-    target = transform_points(poses[seg], ref) + 1e-4 * torch.randn(ref.shape, generator=gen, dtype=torch.float64)
+    noise = 1e-4 * torch.randn(ref.shape, generator=gen, dtype=torch.float64)
+    target = transform_points(poses[seg], ref) + noise
     active = torch.tensor([True, True, False])
     fit = polar_fit(ref, target, seg, 3, active)
     exact, _ = kabsch(ref[:38], target[:38], seg[:38], 2)
     assert torch.allclose(fit[:2, :3], exact[:, :3], atol=1e-12)
     assert quat_angle(fit[:2, 3:], exact[:, 3:]).max() < 1e-9
     # The inactive floor comes out finite (identity rotation about its centroid).
-    assert torch.isfinite(fit).all() and torch.allclose(fit[2, 3:].abs(), torch.tensor([1.0, 0, 0, 0], dtype=torch.float64))
+    identity = torch.tensor([1.0, 0, 0, 0], dtype=torch.float64)
+    assert torch.isfinite(fit).all() and torch.allclose(fit[2, 3:].abs(), identity)
 
     # An exactly rigid cube: every singular value equal, yet the fit differentiates correctly.
     exact_cube = transform_points(poses[0], CUBE).requires_grad_(True)
@@ -105,8 +108,9 @@ def test_rollout_loss_weighs_a_carried_velocity_error_alike_at_every_step(
     expect = float(d.square().mean()) / sigma**2
     assert float(trainer.rollout_loss(scene, rest, None)) == pytest.approx(expect, rel=1e-4)
     # A constant position offset (an error made once, then corrected) fades as 1 / j^2.
+    offset = rest[0] + torch.cat((d, d.new_zeros(4)))
     monkeypatch.setattr(trainer.sim, "differentiable_step",
-                        lambda s, hist, kin: torch.where(dyn[:, None], rest[0] + torch.cat((d, d.new_zeros(4))), kin))
+                        lambda s, hist, kin: torch.where(dyn[:, None], offset, kin))
     fade = sum(1 / j**2 for j in range(1, R + 1)) / R
     assert float(trainer.rollout_loss(scene, rest, None)) == pytest.approx(expect * fade, rel=1e-4)
 
