@@ -7,6 +7,7 @@ from typing import Any
 import mujoco
 import numpy as np
 import pytest
+import torch
 from sim_factories import quiet_simulator, wild_simulator, zero_simulator
 
 from fignet_gym.dynamics import (
@@ -288,3 +289,26 @@ def test_scene_type_and_user_dynamics(push_model: mujoco.MjModel) -> None:
         push_model, np.zeros((2, nstate)), _tip_path(push_model, 3)[None], frame_skip=5
     )
     np.testing.assert_allclose(out[:, :, 0], [[0.01, 0.02, 0.03]] * 2)
+
+
+def test_fignet_bfloat16_precision_follows_float32() -> None:
+    """The opt-in bf16 network on the shipped push model: a 0.5 s push ends within a few
+    millimetres of the float32 rollout (measured over 100 test pushes: median 0.1 mm, max 2.1),
+    and not bit-identical to it (the bf16 network did run)."""
+    push_model = mujoco.MjModel.from_xml_string(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
+    d = mujoco.MjData(push_model)
+    nstate = mujoco.mj_stateSize(push_model, STATE_SPEC)
+    init = np.zeros((1, nstate))
+    mujoco.mj_getState(push_model, d, init[0], STATE_SPEC)
+    control = _tip_path(push_model, 25, speed=0.1)[None]
+    f32 = FIGNetDynamics("push")
+    bf16 = FIGNetDynamics("push", precision="bfloat16")
+    assert bf16.simulator.inference_dtype == torch.bfloat16
+    a = f32.rollout(push_model, init, control, frame_skip=10)
+    b = bf16.rollout(push_model, init, control, frame_skip=10)
+    qpos = slice(1, 1 + push_model.nq)  # the state is (time, qpos, qvel, ...)
+    assert np.abs(a[0, -1, qpos] - init[0, qpos]).max() > 0.01  # the object was pushed
+    gap = np.abs(a[..., qpos] - b[..., qpos]).max()
+    assert 0 < gap < 3e-3
+    with pytest.raises(ValueError, match="precision must be one of"):
+        FIGNetDynamics("push", precision="float16")

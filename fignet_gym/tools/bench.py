@@ -256,7 +256,8 @@ def shipped_table(args: argparse.Namespace, dtype: torch.dtype, scenes: list[Ben
     return rows
 
 
-def rollout_table(args: argparse.Namespace, scenes: list[BenchScene]) -> dict[str, Any]:
+def rollout_table(args: argparse.Namespace, dtype: torch.dtype, scenes: list[BenchScene]
+                  ) -> dict[str, Any]:
     """Dynamics.rollout throughput of the shipped models against mujoco.rollout."""
     from fignet_gym.tools.bench_limits import time_rollouts
 
@@ -265,7 +266,7 @@ def rollout_table(args: argparse.Namespace, scenes: list[BenchScene]) -> dict[st
         name = b.name.split()[0]
         vel = np.array([0.1, 0.0, 0.0]) if b.model.nmocap else None
         rows = time_rollouts(b.model, b.data, b.substeps, name, args.rollout_batch,
-                             args.rollout_steps, vel)
+                             args.rollout_steps, vel, dtype=dtype)
         out[name] = rows
         print(f"\n== Dynamics.rollout, {name}, {args.rollout_steps} steps: scene-steps per second "
               "(learned: CPU s of this process)")
@@ -292,7 +293,7 @@ def run(args: argparse.Namespace) -> None:
         if args.shipped:
             report["shipped"] = shipped_table(args, dtype, scenes)
         if args.rollout:
-            report["rollout"] = rollout_table(args, scenes)
+            report["rollout"] = rollout_table(args, dtype, scenes)
         if args.json:
             Path(args.json).write_text(json.dumps(report, indent=1))
             print(f"wrote {args.json}")
