@@ -298,16 +298,20 @@ def test_fignet_bfloat16_precision_follows_float32() -> None:
     push_model = mujoco.MjModel.from_xml_string(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
     d = mujoco.MjData(push_model)
     nstate = mujoco.mj_stateSize(push_model, STATE_SPEC)
-    init = np.zeros((1, nstate))
-    mujoco.mj_getState(push_model, d, init[0], STATE_SPEC)
-    control = _tip_path(push_model, 25, speed=0.1)[None]
+    B = 48  # enough nodes (30 each) for the bf16 network (LOW_PRECISION_MIN_NODES)
+    init = np.zeros((B, nstate))
+    for i in range(B):
+        mujoco.mj_resetData(push_model, d)
+        d.qpos[1] = 0.001 * i
+        mujoco.mj_getState(push_model, d, init[i], STATE_SPEC)
+    control = np.stack([_tip_path(push_model, 25, speed=0.1)] * B)
     f32 = FIGNetDynamics("push")
     bf16 = FIGNetDynamics("push", precision="bfloat16")
     assert bf16.simulator.inference_dtype == torch.bfloat16
     a = f32.rollout(push_model, init, control, frame_skip=10)
     b = bf16.rollout(push_model, init, control, frame_skip=10)
     qpos = slice(1, 1 + push_model.nq)  # the state is (time, qpos, qvel, ...)
-    assert np.abs(a[0, -1, qpos] - init[0, qpos]).max() > 0.01  # the object was pushed
+    assert np.abs(a[:, -1, qpos] - init[:, qpos]).max() > 0.01  # the object was pushed
     gap = np.abs(a[..., qpos] - b[..., qpos]).max()
     assert 0 < gap < 3e-3
     with pytest.raises(ValueError, match="precision must be one of"):

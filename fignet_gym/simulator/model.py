@@ -189,6 +189,12 @@ class TrainingExample:
     true_node_pos: Tensor
 
 
+#: Fewest mesh nodes for which a lower ``inference_dtype`` is used: on smaller graphs (one to ~16
+#: push scenes, one to ~3 toss scenes) bf16 is slower than float32 on this repository's CPUs
+#: (docs/experiments.md, Issue 17), so they run in float32.
+LOW_PRECISION_MIN_NODES = 1024
+
+
 class LearnedSimulator(nn.Module):
     """FIGNet as a simulator: ``step(scene, history, next_kinematic) -> next poses``."""
 
@@ -207,8 +213,9 @@ class LearnedSimulator(nn.Module):
         self.target_norm = Normalizer(3)
         # Precision of the network at inference (not a config field: it changes no parameter and
         # is not saved). torch.bfloat16 runs a bfloat16 copy of the whole network (matmuls,
-        # LayerNorms, sums), 1.4-2.4x faster per batched scene on CPUs with AVX-512 BF16 or AMX,
-        # at a relative error of ~1e-2 in the accelerations (docs/experiments.md, Issue 17).
+        # LayerNorms, sums) on graphs of at least LOW_PRECISION_MIN_NODES nodes, 1.4-1.6x faster
+        # per batched scene on CPUs with AVX-512 BF16 or AMX, at a relative error of ~1e-2 in the
+        # accelerations (docs/experiments.md, Issue 17).
         self.inference_dtype: torch.dtype = torch.float32
         self._low_precision: tuple[tuple, nn.Module] | None = None
 
@@ -263,7 +270,7 @@ class LearnedSimulator(nn.Module):
         """Per-node finite-difference acceleration (m per step^2), ``float[N, 3]``, including the
         gravity prior (which non-dynamic nodes also get: their prediction is never used)."""
         graph = self.normalize(graph)
-        if self.inference_dtype == torch.float32:
+        if self.inference_dtype == torch.float32 or graph.node_features.shape[0] < LOW_PRECISION_MIN_NODES:
             out = self.net(graph)
         else:
             out = self._low_precision_net()(graph.cast(self.inference_dtype)).float()
