@@ -22,8 +22,8 @@ from fignet_gym.dynamics import learned as learned_dynamics
 from fignet_gym.mjcf import push_scene_xml
 from fignet_gym.pretrained import load_checkpoint
 from fignet_gym.simulator import networks
-from fignet_gym.simulator.scene import Scene
 from fignet_gym.simulator.model import LOW_PRECISION_MIN_NODES
+from fignet_gym.simulator.scene import Scene
 
 
 @pytest.fixture(scope="module")
