@@ -213,7 +213,7 @@ class LearnedSimulator(nn.Module):
         self.target_norm = Normalizer(3)
         # Precision of the network at inference (not a config field: it changes no parameter and
         # is not saved). torch.bfloat16 runs a bfloat16 copy of the whole network (matmuls,
-        # LayerNorms, sums) on graphs of at least LOW_PRECISION_MIN_NODES nodes, 1.4-1.6x faster
+        # LayerNorms, sums) on graphs of at least LOW_PRECISION_MIN_NODES nodes, 1.3-1.5x faster
         # per batched scene on CPUs with AVX-512 BF16 or AMX, at a relative error of ~1e-2 in the
         # accelerations (docs/experiments.md, Issue 17).
         self.inference_dtype: torch.dtype = torch.float32
