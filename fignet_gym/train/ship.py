@@ -96,7 +96,7 @@ Mesh options: {c.mesh_options}.
   input noise std {c.noise_std:.3g} m ({c.noise_std / m["median_node_acceleration"]:.2g} x the median
   per-step acceleration of moving nodes in the held-out data, {m["median_node_acceleration"]:.2g} m);
   rotational noise std {c.rotation_noise_std or "(from the position noise)"} rad; pushforward unrolls
-  of up to {tr.get("unroll_steps", 0)} steps (from step {tr.get("unroll_after", 0)});
+  of up to {tr.get("unroll_steps", 0)} steps (from step {tr.get("unroll_after", 0)});{_rollout(tr)}
   random rotations about z{"; half of the windows mirrored in y = 0" if tr.get("mirror") else ""};
   Adam, lr {tr.get("lr")} decaying to {tr.get("lr_final")};
   weight average (EMA) decay {tr.get("ema_decay", 0)}.
@@ -125,6 +125,13 @@ Rotation gain (median of predicted / true turn, objects turning more than 1 deg)
 teacher-forced one-step spin gain (slope of predicted on true change of angular velocity):
 {m["one_step_spin_gain"]:.2f}.{_free_flight(m)}
 """
+
+
+def _rollout(tr: dict[str, Any]) -> str:
+    steps = tr.get("rollout_steps", 0)
+    return "" if not steps else (
+        f"\n  training through rollouts of {steps} steps (`rollout_steps`, weight "
+        f"{tr.get('rollout_weight')});")
 
 
 def _extras(c: SimulatorConfig) -> str:
