@@ -174,7 +174,8 @@ def test_sim2real_warm_start_raises_when_interrupted(tmp_path: Path,
     monkeypatch.setattr(Trainer, "run", original)  # called again: resumes and finishes
     assert train_on_split(train_file, valid_file, 2, out, 4, overrides=TINY, init=str(init)).is_file()
     assert json.loads((out / "done.json").read_text())["step"] == 4
-    # The fine-tuned model keeps the prior its accelerations are residuals of, not the preset's.
+    # On the same tosses the fine-tune gets the prior its accelerations are residuals of (the
+    # measured one again), not the preset's rounded one.
     prior = json.loads((tmp_path / "init" / "config.json").read_text())["simulator"]["gravity"]
     assert abs(prior[2] + 9.61) > 1e-3
     assert json.loads((out / "config.json").read_text())["simulator"]["gravity"] == prior

@@ -125,17 +125,16 @@ def train_on_split(
             ``fignet-gym train --set``.
         seed: seed of initialisation, sampling and noise.
         init: fine-tune this checkpoint (a file or a pretrained name) instead of starting from
-            scratch; its gravity prior is kept (its learned accelerations are residuals
-            of that prior), and a resumed run continues its own ``last.pt``.
+            scratch (a resumed run continues its own ``last.pt``).
 
     Raises :class:`TrainingInterrupted` if the run was stopped before its last step (its
     ``last.pt`` is written: calling again resumes it exactly).
 
-    The gravity prior of a run from scratch is measured on the training subset
-    (:func:`free_flight_gravity`) unless ``overrides`` sets ``simulator.gravity``. Returns
+    The gravity prior is measured on the training subset (:func:`free_flight_gravity`; for a
+    fine-tune on the checkpoint's own data, its own prior) unless ``overrides`` sets
+    ``simulator.gravity``. Returns
     ``out_dir / "best.pt"``.
     """
-    from fignet_gym.pretrained import load_checkpoint
     from fignet_gym.train.rundir import check_resume_config
     from fignet_gym.train.training import Trainer, load_run_config
 
@@ -159,10 +158,10 @@ def train_on_split(
     # CPU as 500 training steps.
     sets.setdefault("training.valid_every", max(25, steps // 12))
     if "simulator.gravity" not in sets:
-        # A fine-tuned model's accelerations are residuals of its own prior: a prior rounded
-        # differently (the preset's -9.61 against a measured -9.612) already moves its rollouts.
-        sets["simulator.gravity"] = (load_checkpoint(init).config.gravity if init is not None
-                                     else (0.0, 0.0, free_flight_gravity(trajs)))
+        # Fine-tunes too: on the data a checkpoint was trained on this is its own prior (its
+        # accelerations are residuals of it; the preset's rounded -9.61 instead of a measured
+        # -9.612 already moves the rollouts), on other data the data's gravity.
+        sets["simulator.gravity"] = (0.0, 0.0, free_flight_gravity(trajs))
     sim_cfg, cfg = load_run_config(config, sets)
     # A run left in ``out`` (finished or not) is only reused when it is the run asked for: a
     # changed budget or recipe must not return stale results.
