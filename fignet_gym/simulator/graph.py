@@ -81,14 +81,18 @@ class Graph:
             "world": lambda: self.node_edges.features,
         }[name]()
 
-    def cast(self, dtype: torch.dtype) -> Graph:
-        """The same graph with every feature tensor in ``dtype`` (positions and indices kept)."""
+    def map_features(self, fn: Callable[[str, Tensor], Tensor]) -> Graph:
+        """The same topology with every feature tensor ``x`` of kind ``name`` (node, object,
+        obj_mesh, mesh_obj, mesh, face, world) replaced by ``fn(name, x)``; positions and indices
+        are kept."""
         return self.with_features(
-            node_features=self.node_features.to(dtype), object_features=self.object_features.to(dtype),
-            obj_mesh_features=self.obj_mesh_features.to(dtype),
-            mesh_obj_features=self.mesh_obj_features.to(dtype),
-            mesh=self.mesh_edges.features.to(dtype), face=self.face_edges.features.to(dtype),
-            world=self.node_edges.features.to(dtype))
+            node_features=fn("node", self.node_features),
+            object_features=fn("object", self.object_features),
+            obj_mesh_features=fn("obj_mesh", self.obj_mesh_features),
+            mesh_obj_features=fn("mesh_obj", self.mesh_obj_features),
+            mesh=fn("mesh", self.mesh_edges.features),
+            face=fn("face", self.face_edges.features),
+            world=fn("world", self.node_edges.features))
 
     def with_features(self, **feats: Tensor) -> Graph:
         """The same topology with some feature tensors replaced (used for normalisation)."""

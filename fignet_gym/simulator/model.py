@@ -254,16 +254,7 @@ class LearnedSimulator(nn.Module):
 
     def normalize(self, g: Graph, accumulate: bool = False) -> Graph:
         """Normalise every feature tensor (accumulating statistics when training)."""
-        n = self.norms
-        return g.with_features(
-            node_features=n["node"](g.node_features, accumulate),
-            object_features=n["object"](g.object_features, accumulate),
-            obj_mesh_features=n["obj_mesh"](g.obj_mesh_features, accumulate),
-            mesh_obj_features=n["mesh_obj"](g.mesh_obj_features, accumulate),
-            mesh=n["mesh"](g.mesh_edges.features, accumulate),
-            face=n["face"](g.face_edges.features, accumulate),
-            world=n["world"](g.node_edges.features, accumulate),
-        )
+        return g.map_features(lambda kind, x: self.norms[kind](x, accumulate))
 
     # ------------------------------------------------------------------ inference
     def predict_acceleration(self, graph: Graph) -> Tensor:
@@ -273,7 +264,8 @@ class LearnedSimulator(nn.Module):
         if self.inference_dtype == torch.float32 or graph.node_features.shape[0] < LOW_PRECISION_MIN_NODES:
             out = self.net(graph)
         else:
-            out = self._low_precision_net()(graph.cast(self.inference_dtype)).float()
+            low = graph.map_features(lambda _, x: x.to(self.inference_dtype))
+            out = self._low_precision_net()(low).float()
         acc = self._rigid(self.target_norm.inverse(out), graph)
         return acc + self.gravity_step()
 
