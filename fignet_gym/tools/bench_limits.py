@@ -148,13 +148,13 @@ def _rollout_inputs(model: mujoco.MjModel, data: mujoco.MjData, batch: int, step
 def time_rollouts(model: mujoco.MjModel, data: mujoco.MjData, substeps: int,
                   checkpoint: str | LearnedSimulator, batches: list[int], steps: int = 25,
                   mocap_velocity: np.ndarray | None = None, repeats: int = 3,
-                  dtype: torch.dtype = torch.float32) -> list[dict[str, Any]]:
+                  precision: str = "float32") -> list[dict[str, Any]]:
     """Scene-steps per second of ``Dynamics.rollout`` over ``steps`` recorded steps of ``substeps``
-    MuJoCo timesteps each, for each batch size: learned (network in ``dtype``), ``mujoco.rollout``
+    MuJoCo timesteps each, for each batch size: learned (network in ``precision``), ``mujoco.rollout``
     on one thread and on every CPU. Times are medians of ``repeats`` runs (learned: CPU seconds of
     this process; MuJoCo multi-threaded: wall seconds, its threads are not this process's CPU
     time)."""
-    learned = FIGNetDynamics(checkpoint, precision=str(dtype).removeprefix("torch."))
+    learned = FIGNetDynamics(checkpoint, precision=precision)
     mj1, mjn = MujocoDynamics(nthread=1), MujocoDynamics(nthread=os.cpu_count() or 1)
     out = []
     for b in batches:

@@ -574,6 +574,11 @@ class Trainer:
             poses.append(p)
         return Scene.batch(scenes).to(self.device), torch.cat(poses, dim=1).to(self.device)
 
+    @property
+    def _warming_up(self) -> bool:
+        """Plain one-step training still (``unroll_after``): no pushforward, no rollout loss."""
+        return self.state.step < self.cfg.unroll_after
+
     def pushforward(self, scene: Scene, poses: Tensor, k: int | None = None) -> tuple[Tensor, Tensor | None]:
         """Roll the model out for ``k`` steps (default: drawn uniformly from ``0..unroll_steps``,
         0 during the first ``unroll_after`` optimiser steps)
@@ -584,8 +589,8 @@ class Trainer:
         if K <= 0:
             return poses, None
         if k is None:
-            warm = self.state.step < self.cfg.unroll_after
-            k = 0 if warm else int(torch.randint(0, K + 1, (), generator=self.gen, device=self.device))
+            k = 0 if self._warming_up else int(
+                torch.randint(0, K + 1, (), generator=self.gen, device=self.device))
         poses = poses[K - k:]
         if k == 0:
             return poses, None
@@ -604,7 +609,7 @@ class Trainer:
         H = self.sim.config.history + 1
         example = self.sim.training_example(scene, poses[:H + 1], self.gen, inputs)
         loss = self.sim.loss(example, self.cfg.rigid_loss_weight)
-        if self.cfg.rollout_steps > 0 and self.state.step >= self.cfg.unroll_after:
+        if self.cfg.rollout_steps > 0 and not self._warming_up:
             loss = loss + self.cfg.rollout_weight * self.rollout_loss(scene, poses, inputs)
         return loss
 
