@@ -1,6 +1,7 @@
 """Shared test fixtures: deterministic seeds, headless rendering, small thread counts."""
 
 import os
+from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -36,3 +37,14 @@ def _deterministic() -> None:
 def push_like_xml() -> str:
     """A box on a floor with a mocap cylinder tip (MuJoCo primitives only)."""
     return PUSH_LIKE_XML
+
+
+@pytest.fixture(scope="module")
+def push_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Three generated pushes (seed 7) in a trajectory file, for training tests."""
+    from fignet_gym.data.format import write_trajectories
+    from fignet_gym.data.generate import iter_trajectories
+
+    path = tmp_path_factory.mktemp("data") / "push.h5"
+    write_trajectories(path, list(iter_trajectories("push", 3, seed=7)))
+    return path

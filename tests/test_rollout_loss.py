@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from fignet_gym.data.format import build_scene, load_trajectories, write_trajectories
-from fignet_gym.data.generate import iter_trajectories
+from fignet_gym.data.format import build_scene, load_trajectories
 from fignet_gym.simulator.geometry import axis_angle_to_quat, kabsch, polar_fit, quat_angle, transform_points
 from fignet_gym.train.training import Trainer, WindowSampler, load_run_config
 
@@ -16,13 +15,6 @@ TINY = {"simulator.latent_size": 8, "simulator.message_passing_steps": 1,
         "training.valid_trajectories": 1, "training.threads": 1}
 CUBE = 0.05 * torch.tensor([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)],
                            dtype=torch.float64)
-
-
-@pytest.fixture(scope="module")
-def push_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("data") / "push.h5"
-    write_trajectories(path, list(iter_trajectories("push", 3, seed=7)))
-    return path
 
 
 def _random_pose(gen: torch.Generator) -> torch.Tensor:

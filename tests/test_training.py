@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from fignet_gym.data.format import load_trajectories, write_trajectories
+from fignet_gym.data.format import load_trajectories
 from fignet_gym.data.generate import iter_trajectories
 from fignet_gym.train import training
 from fignet_gym.train.training import (
@@ -24,13 +24,6 @@ from fignet_gym.train.training import (
 TINY = {"simulator.latent_size": 8, "simulator.message_passing_steps": 1,
         "training.batch_size": 2, "training.steps": 6, "training.valid_every": 100,
         "training.valid_trajectories": 1, "training.threads": 1, "training.unroll_steps": 2}
-
-
-@pytest.fixture(scope="module")
-def push_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("data") / "push.h5"
-    write_trajectories(path, list(iter_trajectories("push", 3, seed=7)))
-    return path
 
 
 def _trainer(push_file: Path, out: Path, resume: bool = False) -> Trainer:
