@@ -100,7 +100,8 @@ def _sim2real(args: argparse.Namespace) -> int:
                  seed=args.seed, horizon=args.horizon, resume=args.resume,
                  fit_evaluations=args.fit_evaluations, fit_trajectories=args.fit_trajectories,
                  fignet=not args.no_fignet, pretrain=args.pretrain, config=args.config,
-                 budget=args.budget, overrides=_overrides(args.set) or None, init=args.init)
+                 budget=args.budget, overrides=_overrides(args.set) or None, init=args.init,
+                 polish=not args.no_polish)
     return 0
 
 
@@ -288,6 +289,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--init", default=None, help="warm-start FIGNet from a checkpoint or pretrained name")
     r.add_argument("--set", help='JSON overrides of the training config, e.g. \'{"training.lr": 5e-4}\'')
     r.add_argument("--no-fignet", action="store_true", help="MuJoCo stages only")
+    r.add_argument("--no-polish", action="store_true",
+                   help="skip the rollout polish of models with 64 or more training trajectories")
     r.add_argument("--pretrain", type=int_at_least(0), default=0, metavar="N",
                    help="pretrain FIGNet on N synthetic tosses from MuJoCo fitted on the smallest "
                         "size's trajectories, then fine-tune each size (0: from scratch)")

@@ -179,3 +179,46 @@ def test_sim2real_warm_start_raises_when_interrupted(tmp_path: Path,
     prior = json.loads((tmp_path / "init" / "config.json").read_text())["simulator"]["gravity"]
     assert abs(prior[2] + 9.61) > 1e-3
     assert json.loads((out / "config.json").read_text())["simulator"]["gravity"] == prior
+
+
+def test_polish_fine_tunes_the_selected_model_through_rollouts(tmp_path: Path,
+                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    from fignet_gym.train import real
+
+    monkeypatch.setattr(real, "POLISH_STEPS", 2)
+    trajs = cube_tosses(4, -9.6)
+    out = tmp_path / "run"
+    best = train_on_split(trajs[:2], trajs[3:], None, out, budget=4, overrides=TINY, polish=True)
+    assert best == out / "polish" / "best.pt" and best.is_file()
+    base_cfg = json.loads((out / "config.json").read_text())
+    cfg = json.loads((out / "polish" / "config.json").read_text())
+    assert cfg["training"]["rollout_steps"] == 10 and base_cfg["training"]["rollout_steps"] == 0
+    assert cfg["training"]["steps"] == 2 and cfg["training"]["lr"] == pytest.approx(1e-4)
+    # The recipe and the prior carry over; the base run's schedule does not.
+    assert cfg["simulator"] == base_cfg["simulator"]
+    assert cfg["training"]["batch_size"] == 2
+    # It starts from the base run's selected model: validated first, it scores what that scored.
+    first = json.loads((out / "polish" / "curve.jsonl").read_text().splitlines()[0])
+    base_best = json.loads((out / "done.json").read_text())["best_score"]
+    assert first["step"] == 0 and first["score"] == pytest.approx(base_best, rel=1e-6)
+    hours = [json.loads((d / "done.json").read_text())["cpu_hours"] for d in (out, out / "polish")]
+    assert real.run_cpu_hours(out) == pytest.approx(sum(hours))
+    assert np.isnan(real.run_cpu_hours(tmp_path / "none"))
+    # Called again, the finished base and polish runs are returned, not trained again.
+    stamp = (out / "polish" / "last.pt").stat().st_mtime_ns
+    assert train_on_split(trajs[:2], trajs[3:], None, out, budget=4, overrides=TINY, polish=True) == best
+    assert (out / "polish" / "last.pt").stat().st_mtime_ns == stamp
+
+
+def test_sim2real_polishes_only_large_training_sets(tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    from fignet_gym.train import real
+    from fignet_gym.train.sim2real import default_train
+
+    asked: list = []
+    monkeypatch.setattr(real, "train_on_split", lambda *a, polish, **k: asked.append((a[2], polish)))
+    for size in (16, real.POLISH_MIN_SIZE - 1, real.POLISH_MIN_SIZE, None):
+        default_train()(tmp_path / "t.h5", tmp_path / "v.h5", size, tmp_path / str(size))
+    default_train(polish=False)(tmp_path / "t.h5", tmp_path / "v.h5", None, tmp_path / "n")
+    assert asked == [(16, False), (real.POLISH_MIN_SIZE - 1, False), (real.POLISH_MIN_SIZE, True),
+                     (None, True), (None, False)]

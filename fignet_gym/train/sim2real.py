@@ -66,16 +66,19 @@ class Sim2RealError(ValueError):
 
 
 def default_train(config: str = "cube-real", budget: int | None = None,
-                  overrides: dict[str, Any] | None = None, init: str | None = None) -> TrainFn:
+                  overrides: dict[str, Any] | None = None, init: str | None = None,
+                  polish: bool = True) -> TrainFn:
     """The FIGNet training step: ``train_on_split`` with ``config`` and ``budget`` optimiser
     steps (or its size-dependent default), from scratch or warm-started from ``init`` (a
-    checkpoint or pretrained name), selected on validation either way."""
+    checkpoint or pretrained name), selected on validation either way; with ``polish``, sizes
+    from ``POLISH_MIN_SIZE`` on (``None``: all) are then polished through rollouts."""
 
     def train(train_file: Path, valid_file: Path, size: int | None, out_dir: Path) -> Path:
-        from fignet_gym.train.real import train_on_split
+        from fignet_gym.train.real import POLISH_MIN_SIZE, train_on_split
 
         return train_on_split(train_file, valid_file, size, out_dir, budget, config=config,
-                              overrides=overrides, init=init)
+                              overrides=overrides, init=init,
+                              polish=polish and (size is None or size >= POLISH_MIN_SIZE))
 
     return train
 
@@ -128,18 +131,20 @@ def run_sim2real(
     given: int = 3, resume: bool = False, fit_evaluations: int = 240, fit_trajectories: int = 64,
     train_fn: TrainFn | None = None, fignet: bool = True, base_params: Any = None,
     pretrain: int = 0, config: str = "cube-real", budget: int | None = None,
-    overrides: dict[str, Any] | None = None, init: str | None = None,
+    overrides: dict[str, Any] | None = None, init: str | None = None, polish: bool = True,
 ) -> dict[str, Any]:
     """Run every stage (see the module docstring) and return the results dict.
 
     ``pretrain``: synthetic tosses to pretrain on (0: none). ``train_fn`` trains each size;
     by default :func:`default_train` with ``config``, ``budget``, ``overrides`` and ``init``, or
     with ``pretrain`` a fine-tuning of :func:`pretrain_checkpoint` (:data:`FINETUNE_OVERRIDES`).
-    ``config`` and ``overrides`` are also the pretraining's recipe.
+    ``config`` and ``overrides`` are also the pretraining's recipe. ``polish``: polish the
+    models of ``POLISH_MIN_SIZE`` or more trajectories through rollouts (``train_on_split``).
     """
     from fignet_gym.data.format import load_trajectories
     from fignet_gym.train.analytic import ContactParams
     from fignet_gym.train.evaluation import paired_ratios, rollout_metrics
+    from fignet_gym.train.real import run_cpu_hours
     from fignet_gym.train.sysid import env_parameters, fit_contact_params
 
     out = Path(out)
@@ -153,9 +158,11 @@ def run_sim2real(
     config_path = out / "run.json"
     run_cfg = {"data": str(data), "fractions": list(fractions), "seed": seed, "horizon": horizon,
                "given_poses": given, "fit_evaluations": fit_evaluations,
-               "fit_trajectories": fit_trajectories, "pretrain": pretrain}
+               "fit_trajectories": fit_trajectories, "pretrain": pretrain, "polish": polish}
     old = _read(config_path)
-    if old is not None and {k: old.get(k, 0 if k == "pretrain" else None) for k in run_cfg} != run_cfg:
+    # Runs from before a key existed ran with its old behaviour (no pretraining, no polish).
+    absent = {"pretrain": 0, "polish": False}
+    if old is not None and {k: old.get(k, absent.get(k)) for k in run_cfg} != run_cfg:
         raise Sim2RealError(f"{config_path}: this run was started with {old}, not {run_cfg}: "
                             "resume it with the same options or use another --out")
     _write(config_path, run_cfg)
@@ -205,8 +212,8 @@ def run_sim2real(
     if fignet:
         if train_fn is None:
             train_fn = (default_train(config, budget, {**FINETUNE_OVERRIDES, **(overrides or {})},
-                                      init=str(pretrain_checkpoint(out))) if pretrain
-                        else default_train(config, budget, overrides, init))
+                                      init=str(pretrain_checkpoint(out)), polish=polish)
+                        if pretrain else default_train(config, budget, overrides, init, polish))
         for size in sizes:
             label = _size_label(size)
             path = out / f"fignet_{label}.json"
@@ -227,8 +234,7 @@ def run_sim2real(
                 res["vs_fitted_mujoco"] = paired_ratios(res, fitted)
                 _write(path, res)
             learned[label] = res
-            done = _read(out / f"fignet_{label}" / "done.json")
-            cpu_hours.setdefault("fignet", {})[label] = done["cpu_hours"] if done else math.nan
+            cpu_hours.setdefault("fignet", {})[label] = run_cpu_hours(out / f"fignet_{label}")
     cpu_hours["total"] = (cpu_hours["mujoco_fit"] + cpu_hours.get("pretrain", 0.0)
                           + sum(cpu_hours.get("fignet", {}).values()))
     results = {"run": run_cfg, **stages, "cpu_hours": cpu_hours,
