@@ -215,10 +215,15 @@ def test_sim2real_polishes_only_large_training_sets(tmp_path: Path,
     from fignet_gym.train import real
     from fignet_gym.train.sim2real import default_train
 
+    monkeypatch.setattr(real, "POLISH_MIN_SIZE", 3)
+    train_file = tmp_path / "t.h5"
+    write_trajectories(train_file, cube_tosses(4, -9.6, poses=12))
     asked: list = []
     monkeypatch.setattr(real, "train_on_split", lambda *a, polish, **k: asked.append((a[2], polish)))
-    for size in (16, real.POLISH_MIN_SIZE - 1, real.POLISH_MIN_SIZE, None):
-        default_train()(tmp_path / "t.h5", tmp_path / "v.h5", size, tmp_path / str(size))
-    default_train(polish=False)(tmp_path / "t.h5", tmp_path / "v.h5", None, tmp_path / "n")
-    assert asked == [(16, False), (real.POLISH_MIN_SIZE - 1, False), (real.POLISH_MIN_SIZE, True),
-                     (None, True), (None, False)]
+    for size in (2, 3, None):  # None: all 4
+        default_train()(train_file, tmp_path / "v.h5", size, tmp_path / str(size))
+    default_train(polish=False)(train_file, tmp_path / "v.h5", None, tmp_path / "n")
+    assert asked == [(2, False), (3, True), (None, True), (None, False)]
+    monkeypatch.setattr(real, "POLISH_MIN_SIZE", 5)  # "all" is counted, not taken as large
+    default_train()(train_file, tmp_path / "v.h5", None, tmp_path / "m")
+    assert asked[-1] == (None, False)

@@ -70,15 +70,17 @@ def default_train(config: str = "cube-real", budget: int | None = None,
                   polish: bool = True) -> TrainFn:
     """The FIGNet training step: ``train_on_split`` with ``config`` and ``budget`` optimiser
     steps (or its size-dependent default), from scratch or warm-started from ``init`` (a
-    checkpoint or pretrained name), selected on validation either way; with ``polish``, sizes
-    from ``POLISH_MIN_SIZE`` on (``None``: all) are then polished through rollouts."""
+    checkpoint or pretrained name), selected on validation either way; with ``polish``, subsets
+    of ``POLISH_MIN_SIZE`` or more trajectories are then polished through rollouts."""
 
     def train(train_file: Path, valid_file: Path, size: int | None, out_dir: Path) -> Path:
-        from fignet_gym.train.real import POLISH_MIN_SIZE, train_on_split
+        from fignet_gym.data.format import load_trajectories
+        from fignet_gym.train import real
 
-        return train_on_split(train_file, valid_file, size, out_dir, budget, config=config,
-                              overrides=overrides, init=init,
-                              polish=polish and (size is None or size >= POLISH_MIN_SIZE))
+        n = size if size is not None else len(load_trajectories(train_file))
+        return real.train_on_split(train_file, valid_file, size, out_dir, budget, config=config,
+                                   overrides=overrides, init=init,
+                                   polish=polish and n >= real.POLISH_MIN_SIZE)
 
     return train
 
