@@ -17,8 +17,10 @@ run resumes from its last checkpoint):
    it (:data:`FINETUNE_OVERRIDES`) instead of training from scratch.
 5. ``fignet_<size>/``: a FIGNet run on the first ``size`` training trajectories (the training
    step is :func:`default_train`, a call to ``fignet_gym.train.real.train_on_split``; any callable
-   ``(train_file, valid_file, size, out_dir) -> checkpoint`` can replace it), and
-   ``fignet_<size>.json``: its test metrics, with paired bootstrap ratios to fitted MuJoCo.
+   ``(train_file, valid_file, size, out_dir) -> checkpoint`` can replace it; with ``polish``,
+   runs on ``POLISH_MIN_SIZE`` or more trajectories are then fine-tuned through rollouts in
+   ``fignet_<size>/polish/``), and ``fignet_<size>.json``: its test metrics, with paired
+   bootstrap ratios to fitted MuJoCo.
 6. ``results.json`` (with the CPU hours of every stage), ``table.md`` and ``errors_vs_size.png``.
 
 Errors: median translation RMSE and rotation error over test trajectories at frame ``horizon``
