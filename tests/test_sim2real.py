@@ -331,4 +331,6 @@ def test_sim2real_pretrain_fits_on_the_smallest_subset_and_fine_tunes_each_size(
     assert main(argv + ["--init", "push", "--resume"]) == 2
     assert "--pretrain and --init" in capsys.readouterr().err
     assert main([a if a != "3" else "0" for a in argv] + ["--resume"]) == 2
-    assert "started with" in capsys.readouterr().err
+    assert "started with pretrain 3 (now 0):" in capsys.readouterr().err
+    assert main(argv + ["--resume", "--no-polish"]) == 2  # polished sizes would be stale
+    assert "started with polish True (now False):" in capsys.readouterr().err

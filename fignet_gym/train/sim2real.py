@@ -166,9 +166,12 @@ def run_sim2real(
     old = _read(config_path)
     # Runs from before a key existed ran with its old behaviour (no pretraining, no polish).
     absent = {"pretrain": 0, "polish": False}
-    if old is not None and {k: old.get(k, absent.get(k)) for k in run_cfg} != run_cfg:
-        raise Sim2RealError(f"{config_path}: this run was started with {old}, not {run_cfg}: "
-                            "resume it with the same options or use another --out")
+    changed = [f"{k} {old.get(k, absent.get(k))!r} (now {v!r})" for k, v in run_cfg.items()
+               if old is not None and old.get(k, absent.get(k)) != v]
+    if changed:
+        raise Sim2RealError(f"{config_path}: this run was started with {', '.join(changed)}: "
+                            "resume it with the same options (--no-polish for polish False) or "
+                            "use another --out")
     _write(config_path, run_cfg)
 
     split_dir = out / "split"
