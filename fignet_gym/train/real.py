@@ -15,12 +15,15 @@ import os
 from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
 
 from fignet_gym.data.format import Trajectory, build_scene, load_trajectories
+
+if TYPE_CHECKING:
+    from fignet_gym.train.training import TrainConfig
 
 #: Optimiser steps of ``cube-real`` by training-set size (the last entry for anything larger):
 #: a few tosses are learned (and overfitted) sooner, so small sets get fewer steps. Selection on
@@ -152,7 +155,7 @@ def train_on_split(
     ``out_dir / "best.pt"``.
     """
     from fignet_gym.train.rundir import check_resume_config
-    from fignet_gym.train.training import Trainer, load_run_config
+    from fignet_gym.train.training import load_run_config
 
     trajs = _trajectories(train, "train")
     valid_trajs = _trajectories(valid, "valid")
@@ -183,41 +186,42 @@ def train_on_split(
     # changed budget or recipe must not return stale results.
     check_resume_config(out, sim_cfg, asdict(cfg))
     if done.is_file() and best.is_file():
-        best = finished_run(done, best, cfg.steps)
-        return _polish(trajs, valid_trajs, out, best, config, sets, seed) if polish else best
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "split.json").write_text(json.dumps(
-        {"train": [t.name for t in trajs], "valid": [t.name for t in valid_trajs],
-         "gravity": list(sim_cfg["gravity"]), "steps": cfg.steps}, indent=1))
-    trainer = Trainer(sim_cfg, cfg, trajs, valid_trajs, out, resume=True, init=init)
-    state = trainer.run()
-    if state.step < cfg.steps:  # SIGINT / SIGTERM: last.pt is written, a new call resumes
-        raise TrainingInterrupted(f"{out}: training interrupted at step {state.step} of "
-                                  f"{cfg.steps}; call again to resume")
-    if not best.is_file() or not math.isfinite(state.best_error):
-        raise RuntimeError(f"{out}: no finite validation score: the run diverged")
-    done.write_text(json.dumps({"step": state.step, "cpu_hours": state.cpu_seconds / 3600,
-                                "best_score": state.best_error}))
-    return _polish(trajs, valid_trajs, out, best, config, sets, seed) if polish else best
-
-
-def _polish(trajs: list[Trajectory], valid: list[Trajectory], out: Path, best: Path, config: str,
-            sets: dict[str, Any], seed: int) -> Path:
-    """The polish stage of :func:`train_on_split` in ``out / "polish"``, from ``best``."""
+        finished_run(done, best, cfg.steps)  # refuses a finished run of another budget
+    else:
+        _train(out, sim_cfg, cfg, trajs, valid_trajs, init)
+    if not polish:
+        return best
     # The base run's schedule keys must not carry over; its gravity prior and recipe do.
     base = {k: v for k, v in sets.items()
             if k not in ("training.steps", "training.unroll_after", "training.valid_every")}
-    return train_on_split(trajs, valid, None, out / "polish", POLISH_STEPS, config=config,
+    return train_on_split(trajs, valid_trajs, None, out / "polish", POLISH_STEPS, config=config,
                           overrides={**base, **POLISH_OVERRIDES}, seed=seed, init=str(best))
+
+
+def _train(out: Path, sim_cfg: dict[str, Any], cfg: TrainConfig, trajs: list[Trajectory],
+           valid: list[Trajectory], init: str | None) -> None:
+    """The training of :func:`train_on_split` into ``out`` (resumed if begun); writes
+    ``done.json`` when it reaches its last step."""
+    from fignet_gym.train.training import Trainer
+
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "split.json").write_text(json.dumps(
+        {"train": [t.name for t in trajs], "valid": [t.name for t in valid],
+         "gravity": list(sim_cfg["gravity"]), "steps": cfg.steps}, indent=1))
+    state = Trainer(sim_cfg, cfg, trajs, valid, out, resume=True, init=init).run()
+    if state.step < cfg.steps:  # SIGINT / SIGTERM: last.pt is written, a new call resumes
+        raise TrainingInterrupted(f"{out}: training interrupted at step {state.step} of "
+                                  f"{cfg.steps}; call again to resume")
+    if not (out / "best.pt").is_file() or not math.isfinite(state.best_error):
+        raise RuntimeError(f"{out}: no finite validation score: the run diverged")
+    (out / "done.json").write_text(json.dumps(
+        {"step": state.step, "cpu_hours": state.cpu_seconds / 3600, "best_score": state.best_error}))
 
 
 def run_cpu_hours(out_dir: str | os.PathLike) -> float:
     """CPU hours of a finished :func:`train_on_split` run, its polish stage included (NaN if the
     run has not finished)."""
-    total = 0.0
-    for done in (Path(out_dir) / "done.json", Path(out_dir) / "polish" / "done.json"):
-        if done.is_file():
-            total += json.loads(done.read_text())["cpu_hours"]
-        elif done.parent == Path(out_dir):
-            return math.nan
-    return total
+    done, polished = Path(out_dir) / "done.json", Path(out_dir) / "polish" / "done.json"
+    if not done.is_file():
+        return math.nan
+    return sum(json.loads(f.read_text())["cpu_hours"] for f in (done, polished) if f.is_file())

@@ -166,8 +166,8 @@ def run_sim2real(
     old = _read(config_path)
     # Runs from before a key existed ran with its old behaviour (no pretraining, no polish).
     absent = {"pretrain": 0, "polish": False}
-    changed = [f"{k} {old.get(k, absent.get(k))!r} (now {v!r})" for k, v in run_cfg.items()
-               if old is not None and old.get(k, absent.get(k)) != v]
+    then = {k: old.get(k, absent.get(k)) for k in run_cfg} if old is not None else run_cfg
+    changed = [f"{k} {then[k]!r} (now {v!r})" for k, v in run_cfg.items() if then[k] != v]
     if changed:
         raise Sim2RealError(f"{config_path}: this run was started with {', '.join(changed)}: "
                             "resume it with the same options (--no-polish for polish False) or "
