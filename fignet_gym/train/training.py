@@ -207,7 +207,8 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     # Kubric's -10: the free flight of the training tosses fits -9.61 m/s^2 (median of per-toss
     # parabola fits, ``free_flight_gravity``), and ``train_on_split`` re-measures it on the split
     # it is given. A cube touches the floor with a corner, an edge or a face within a few mm, so a
-    # 2 cm collision radius (~0.4 half-widths) sees every contact a step ahead. The rest is
+    # 2 cm collision radius (~0.4 half-widths) sees every contact a step ahead (3 and 4 cm
+    # were no better: docs/experiments.md, Issue 14, eighth round). The rest is
     # toss-cpu's (5 message-passing steps, a 40k-step schedule, pushforward after 5000 steps):
     # the shipped model's recipe, which beat 3 steps and a 5000-step schedule on validation
     # (docs/experiments.md, "Issue 14: FIGNet on real tosses", second training round). A cube
