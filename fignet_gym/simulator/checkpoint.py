@@ -81,7 +81,7 @@ def content_checksum(blob: dict[str, Any]) -> str:
 
 
 def seal(blob: dict[str, Any]) -> dict[str, Any]:
-    """``blob`` with its content checksum (what :meth:`LearnedSimulator.save` writes)."""
+    """``blob`` with its content checksum (what :func:`save` writes)."""
     return {**blob, CHECKSUM_KEY: content_checksum(blob)}
 
 

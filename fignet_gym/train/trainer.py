@@ -165,7 +165,9 @@ class Trainer:
             # Copies rank 0's weights and normaliser statistics to every process now and its
             # statistics before each step (each process accumulates its own windows' during the
             # step, as rank 0's alone were kept before); averages gradients in backward. The
-            # weight average is rank 0's alone: only rank 0 validates and saves.
+            # weight average is rank 0's alone: only rank 0 validates and saves. Some configs
+            # have parameters no loss reaches (one message-passing step: the object encoder feeds
+            # nothing), so DDP must look for unused ones (and warns once where there are none).
             self.objective = DistributedDataParallel(self.objective, find_unused_parameters=True)
         if self.rank == 0:
             # ``noise_std``: the noise actually used (measured from the data when the training
