@@ -12,7 +12,7 @@ import os as _os
 if not (_os.environ.get("DISPLAY") or _os.environ.get("WAYLAND_DISPLAY")):
     _os.environ.setdefault("MUJOCO_GL", "egl")
 
-from fignet_gym.pretrained import available_pretrained, load_checkpoint, load_pretrained  # noqa: E402
+from fignet_gym.pretrained import available_pretrained, load_pretrained  # noqa: E402
 from fignet_gym.registration import register_when_gymnasium_loads  # noqa: E402
 from fignet_gym.simulator import (  # noqa: E402
     CheckpointError,
@@ -28,7 +28,7 @@ from fignet_gym.simulator import (  # noqa: E402
 __all__ = [
     "CheckpointError", "LearnedSimulator", "MeshOptions", "ObjectKind", "Scene",
     "ShapeMatchError", "SimulatorConfig", "UnsupportedSceneError", "available_pretrained",
-    "load_checkpoint", "load_pretrained",
+    "load_pretrained",
 ]
 __version__ = "0.1.0"
 

@@ -61,7 +61,7 @@ def _overrides(text: str | None) -> dict:
 
 # ----------------------------------------------------------------------------- commands
 def _train(args: argparse.Namespace) -> int:
-    from fignet_gym.train.training import train_from_files
+    from fignet_gym.train.trainer import train_from_files
 
     overrides = _overrides(args.set)
     train_from_files(args.data, args.valid, args.config, args.out, resume=args.resume,

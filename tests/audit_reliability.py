@@ -223,9 +223,10 @@ def crafted_checkpoints(tmp: Path) -> dict[str, Path]:
 
 _LOAD_SNIPPET = """
 import sys, warnings
-from fignet_gym.simulator.model import CheckpointError, LearnedSimulator
+from fignet_gym.pretrained import load_pretrained
+from fignet_gym.simulator.checkpoint import CheckpointError
 try:
-    sim = LearnedSimulator.load(sys.argv[1])
+    sim = load_pretrained(sys.argv[1])
 except CheckpointError as e:
     msg = str(e)
     print("HINT" if "weights_only=False" in msg else "CLEAR", msg[:300])
@@ -718,7 +719,7 @@ def audit_cli(tmp: Path, quick: bool) -> None:
 _KILL_SNIPPET = """
 import os, signal, sys, json
 from pathlib import Path
-from fignet_gym.train import training
+from fignet_gym.train import trainer as training
 kill_at = int(sys.argv[3])
 orig = training.Trainer.validate
 def validate(self, writer=None):

@@ -20,7 +20,7 @@ import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.dynamics import STATE_SPEC, FIGNetDynamics
 from fignet_gym.dynamics import learned as learned_dynamics
 from fignet_gym.mjcf import push_scene_xml
-from fignet_gym.pretrained import load_checkpoint
+from fignet_gym.pretrained import load_pretrained
 from fignet_gym.simulator import networks
 from fignet_gym.simulator.model import LOW_PRECISION_MIN_NODES
 from fignet_gym.simulator.scene import Scene
@@ -28,7 +28,7 @@ from fignet_gym.simulator.scene import Scene
 
 @pytest.fixture(scope="module")
 def push_sim():  # noqa: ANN201
-    return load_checkpoint("push").eval()
+    return load_pretrained("push").eval()
 
 
 def _push_history(scene: Scene, lift: float) -> torch.Tensor:

@@ -15,6 +15,7 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.envs import CubeTossEnv, PushEnv, TossEnv
+from fignet_gym.simulator.checkpoint import save
 
 ENV_IDS = ["fignet_gym/Push-v0", "fignet_gym/Push-v1", "fignet_gym/Toss-v0"]
 #: Keep learned Toss steps cheap in tests: 3 learned steps per toss instead of 50.
@@ -166,7 +167,7 @@ def test_checkpoint_of_another_scene_type_is_refused(
     env_id: str, other: str, tmp_path: Any
 ) -> None:
     path = tmp_path / f"{other}.pt"
-    quiet_simulator(other).save(path)
+    save(quiet_simulator(other), path)
     with pytest.raises(ValueError, match=f"trained on '{other}' scenes"):
         gym.make(env_id, dynamics="fignet", checkpoint=str(path))
     with pytest.raises(ValueError, match="checkpoint= only applies"):

@@ -11,6 +11,7 @@ import torch
 from fignet_gym.cli import main
 from fignet_gym.data.format import TrajectoryWriter, build_scene
 from fignet_gym.data.generate import TossConfig, iter_trajectories
+from fignet_gym.simulator.checkpoint import save
 from fignet_gym.simulator.geometry import quat_mul
 from fignet_gym.simulator.scene import Scene
 from fignet_gym.train.evaluation import (
@@ -128,9 +129,9 @@ def test_evaluate_against_a_second_checkpoint_pairs_the_trajectories(pushes: lis
     data = tmp_path / "pushes.h5"
     write_trajectories(data, pushes)
     zero, quiet = tmp_path / "zero.pt", tmp_path / "quiet.pt"
-    zero_simulator("push").save(zero)
+    save(zero_simulator("push"), zero)
     torch.manual_seed(0)
-    quiet_simulator("push").save(quiet)
+    save(quiet_simulator("push"), quiet)
     same = evaluate(str(zero), str(data), str(tmp_path / "a"), num=2, horizon=10, videos=0, against=str(zero))
     assert same["against"]["ratios"]["translation_rmse"] == pytest.approx([1.0, 1.0, 1.0])
     res = evaluate(str(quiet), str(data), str(tmp_path / "b"), num=2, horizon=10, videos=0, against=str(zero))
@@ -210,7 +211,7 @@ def test_data_dt_must_be_the_models(pushes: list, tmp_path) -> None:
         rollout_metrics(zero_simulator("push", dt=0.01), pushes, horizon=10)
     data, ckpt = tmp_path / "p.h5", tmp_path / "m.pt"
     write_trajectories(data, pushes)
-    zero_simulator("push", dt=0.01).save(ckpt)
+    save(zero_simulator("push", dt=0.01), ckpt)
     assert main(["evaluate", "--checkpoint", str(ckpt), "--data", str(data), "--out",
                  str(tmp_path / "e"), "--videos", "0"]) == 2
 

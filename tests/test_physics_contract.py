@@ -15,9 +15,9 @@ from scipy.spatial.transform import Rotation
 from fignet_gym import load_pretrained
 from fignet_gym.data.format import build_scene
 from fignet_gym.data.generate import iter_trajectories
-from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
+from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig, TrainingNoise
 from fignet_gym.simulator.scene import Scene
-from fignet_gym.train.training import rotate_about_z
+from fignet_gym.train.sampling import rotate_about_z
 
 SMALL = SimulatorConfig(latent_size=16, message_passing_steps=2, collision_radius=0.03)
 
@@ -62,10 +62,10 @@ def test_noisy_training_target_undoes_the_velocity_noise(push_like_xml: str) -> 
     # acceleration that takes the noisy state to the true next position plus the last frame's
     # noise (which no model can see): the clean target minus the velocity noise n_t - n_{t-1}.
     scene, poses = tumbling_box(push_like_xml)
-    noisy_sim = LearnedSimulator(replace(SMALL, noise_std=2e-3))
-    clean = LearnedSimulator(SMALL).training_example(scene, poses)
-    noisy = noisy_sim.training_example(scene, poses, torch.Generator().manual_seed(5))
-    drawn = noisy_sim.pose_noise(scene, poses[:-1], torch.Generator().manual_seed(5))  # the same draw
+    sim, noise = LearnedSimulator(SMALL), TrainingNoise(std=2e-3)
+    clean = sim.training_example(scene, poses)
+    noisy = sim.training_example(scene, poses, torch.Generator().manual_seed(5), noise=noise)
+    drawn = sim.pose_noise(scene, poses[:-1], torch.Generator().manual_seed(5), noise)  # the same draw
     x = scene.node_positions(drawn)
     n = x - scene.node_positions(poses[:-1])  # node noise float[H, N, 3]
     dyn = scene.dynamic_mask[scene.node_object]

@@ -15,9 +15,10 @@ import torch
 from fignet_gym.data.format import Trajectory, write_trajectories
 from fignet_gym.envs.cube_toss import DATA_DT, cube_toss_xml, mujoco_parameters
 from fignet_gym.pretrained import load_pretrained
-from fignet_gym.simulator.model import LearnedSimulator
+from fignet_gym.simulator.checkpoint import save
 from fignet_gym.simulator.normalization import Normalizer
 from fignet_gym.simulator.scene import Scene
+from fignet_gym.train.config import load_run_config
 from fignet_gym.train.real import (
     TrainingInterrupted,
     default_steps,
@@ -25,7 +26,7 @@ from fignet_gym.train.real import (
     train_on_split,
 )
 from fignet_gym.train.rundir import RunFolderError
-from fignet_gym.train.training import Trainer, load_run_config
+from fignet_gym.train.trainer import Trainer
 
 TINY = {"simulator.latent_size": 8, "simulator.message_passing_steps": 1,
         "training.batch_size": 2, "training.valid_trajectories": 2, "training.valid_horizon": 20}
@@ -107,7 +108,7 @@ def test_train_on_split_subsets_measures_gravity_and_resumes(tmp_path: Path,
 
 def test_init_accepts_a_pretrained_name(tmp_path: Path) -> None:
     source = load_pretrained("toss")
-    sim_cfg = {k: v for k, v in source.config.to_dict().items() if k not in ("dt", "noise_std")}
+    sim_cfg = {k: v for k, v in source.config.to_dict().items() if k != "dt"}
     from fignet_gym.data.generate import iter_trajectories
 
     trajs = list(iter_trajectories("toss-simple", 2, seed=3))
@@ -122,11 +123,11 @@ def test_a_warm_start_is_validated_before_its_first_step_and_can_stay_best(tmp_p
     base = train_on_split(trajs[:2], trajs[3:], None, tmp_path / "base", budget=4, overrides=TINY)
     # Saturate the start's normalisers, as a trained model's are: otherwise fine-tuning batches
     # still move their statistics, and with them the model, whatever the learning rate.
-    start_sim = LearnedSimulator.load(base)
+    start_sim = load_pretrained(base)
     for module in start_sim.modules():
         if isinstance(module, Normalizer):
             module.calls.fill_(module.max_accumulations)
-    start_sim.save(base)
+    save(start_sim, base)
     sim_cfg, cfg = load_run_config("cube-real", {**TINY, "training.steps": 2, "training.lr": 1e-12,
                                                  "training.lr_final": 1e-12})
     trainer = Trainer(sim_cfg, cfg, trajs[:2], trajs[3:], tmp_path / "ft", init=str(base))
@@ -137,8 +138,8 @@ def test_a_warm_start_is_validated_before_its_first_step_and_can_stay_best(tmp_p
     # validation ties with step 0 and the start stays the best checkpoint.
     best = torch.load(tmp_path / "ft" / "best.pt", weights_only=True)
     assert best["meta"]["valid"]["step"] == 0
-    start = LearnedSimulator.load(base).state_dict()
-    for name, value in LearnedSimulator.load(tmp_path / "ft" / "best.pt").state_dict().items():
+    start = load_pretrained(base).state_dict()
+    for name, value in load_pretrained(tmp_path / "ft" / "best.pt").state_dict().items():
         assert torch.equal(value, start[name]), name
     # A run from scratch has no step-0 validation.
     first = json.loads((tmp_path / "base" / "curve.jsonl").read_text().splitlines()[0])["step"]

@@ -41,15 +41,18 @@ from fignet_gym.envs.push import PushEnv
 from fignet_gym.envs.sb3 import SB3VecEnvAdapter
 from fignet_gym.envs.toss import TossEnv
 from fignet_gym.mjcf import TossObject
-from fignet_gym.pretrained import available_pretrained, pretrained_path
+from fignet_gym.pretrained import available_pretrained, load_pretrained, pretrained_path
 from fignet_gym.simulator.checkpoint import (
+    CheckpointError,
     CheckpointWarning,
     add_checksum,
     content_checksum,
+    save,
 )
-from fignet_gym.simulator.model import CheckpointError, LearnedSimulator, SimulatorConfig
+from fignet_gym.simulator.checkpoint import load as load_checkpoint_file
+from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
 from fignet_gym.simulator.scene import Scene, UnsupportedSceneError
-from fignet_gym.train.training import TrainConfig
+from fignet_gym.train.config import TrainConfig
 
 SMALL = SimulatorConfig(latent_size=8, message_passing_steps=1, collision_radius=0.03)
 
@@ -146,7 +149,7 @@ def sealed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A small checkpoint saved by this version (with its checksum)."""
     path = tmp_path_factory.mktemp("ckpt") / "small.pt"
     torch.manual_seed(0)
-    LearnedSimulator(SMALL).save(path, meta={"note": "x"})
+    save(LearnedSimulator(SMALL), path, meta={"note": "x"})
     return path
 
 
@@ -169,7 +172,7 @@ def test_unbounded_configs_are_refused_before_anything_is_built(sealed: Path, tm
     with pytest.raises(CheckpointError, match=f"bad.pt: config: .*{field.split('_')[0]}"):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", CheckpointWarning)
-            LearnedSimulator.load(bad)
+            load_pretrained(bad)
     if field != "mesh_options":
         with pytest.raises(ValueError, match=field):
             SimulatorConfig(**{field: value})
@@ -178,7 +181,7 @@ def test_unbounded_configs_are_refused_before_anything_is_built(sealed: Path, tm
 def test_config_that_does_not_match_its_weights_is_refused(sealed: Path, tmp_path: Path) -> None:
     bad = _unsealed(sealed, tmp_path / "m.pt", latent_size=16)
     with pytest.warns(CheckpointWarning), pytest.raises(CheckpointError, match="do not match"):
-        LearnedSimulator.load(bad)
+        load_pretrained(bad)
 
 
 def _flip_weight_bytes(src: Path, dst: Path, n: int, seed: int = 0) -> None:
@@ -202,16 +205,16 @@ def test_flipped_bytes_are_caught_by_the_checksum(sealed: Path, tmp_path: Path, 
     changed = torch.load(bad, weights_only=True)
     assert changed["checksum"] != content_checksum(changed)
     with pytest.raises(CheckpointError, match="flipped.pt: content checksum mismatch"):
-        LearnedSimulator.load(bad)
+        load_pretrained(bad)
 
 
 def test_nan_weights_are_refused_even_when_sealed(tmp_path: Path) -> None:
     sim = LearnedSimulator(SMALL)
     with torch.no_grad():
         next(sim.parameters()).fill_(float("nan"))
-    sim.save(tmp_path / "nan.pt")
+    save(sim, tmp_path / "nan.pt")
     with pytest.raises(CheckpointError, match="NaN or infinite"):
-        LearnedSimulator.load(tmp_path / "nan.pt")
+        load_pretrained(tmp_path / "nan.pt")
 
 
 def test_old_checkpoints_load_with_a_warning_and_can_be_sealed(tmp_path: Path) -> None:
@@ -220,16 +223,16 @@ def test_old_checkpoints_load_with_a_warning_and_can_be_sealed(tmp_path: Path) -
     byte is caught."""
     old_path = _unsealed(pretrained_path("push"), tmp_path / "old.pt")
     with pytest.warns(CheckpointWarning, match="add_checksum"):
-        old = LearnedSimulator.load(old_path)
+        old = load_pretrained(old_path)
     sealed_path = add_checksum(old_path, tmp_path / "push.pt")
     with warnings.catch_warnings():
         warnings.simplefilter("error", CheckpointWarning)
-        new = LearnedSimulator.load(sealed_path)
+        new = load_pretrained(sealed_path)
     for (k, a), b in zip(old.state_dict().items(), new.state_dict().values(), strict=True):
         assert torch.equal(a, b), k
     _flip_weight_bytes(sealed_path, tmp_path / "bad.pt", 3)
     with pytest.raises(CheckpointError, match="checksum"):
-        LearnedSimulator.load(tmp_path / "bad.pt")
+        load_pretrained(tmp_path / "bad.pt")
 
 
 def test_shipped_checkpoints_are_sealed() -> None:
@@ -237,7 +240,7 @@ def test_shipped_checkpoints_are_sealed() -> None:
     for name in available_pretrained():
         with warnings.catch_warnings():
             warnings.simplefilter("error", CheckpointWarning)
-            LearnedSimulator.load(pretrained_path(name))
+            load_pretrained(pretrained_path(name))
 
 
 def _structural_variants(blob: dict) -> dict[str, object]:
@@ -268,7 +271,7 @@ def test_structurally_wrong_checkpoints_raise_checkpoint_error(sealed: Path, tmp
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", CheckpointWarning)
             with pytest.raises(CheckpointError, match="s.pt"):
-                LearnedSimulator.load(path)
+                load_pretrained(path)
             assert name  # (the loop names the variant in a failure's traceback)
 
 
@@ -281,7 +284,7 @@ def test_a_pickle_payload_is_refused_without_torchs_unsafe_hint(tmp_path: Path) 
     torch.save({"format": "fignet_gym.checkpoint/1", "x": Payload()}, buf)
     (tmp_path / "evil.pt").write_bytes(buf.getvalue())
     with pytest.raises(CheckpointError) as info:
-        LearnedSimulator.load(tmp_path / "evil.pt")
+        load_pretrained(tmp_path / "evil.pt")
     assert "evil.pt" in str(info.value) and "weights_only=False" not in str(info.value)
     assert "could run code" in str(info.value)
 
@@ -289,7 +292,7 @@ def test_a_pickle_payload_is_refused_without_torchs_unsafe_hint(tmp_path: Path) 
 def test_a_corrupt_pickle_is_unreadable_not_code(tmp_path: Path) -> None:
     (tmp_path / "junk.pt").write_bytes(b"\x80\x02garbage" * 10)  # a pickle header, then junk
     with pytest.raises(CheckpointError) as info:
-        LearnedSimulator.load(tmp_path / "junk.pt")
+        load_pretrained(tmp_path / "junk.pt")
     assert "junk.pt: not a readable checkpoint" in str(info.value)
     assert "could run code" not in str(info.value)
 
@@ -297,7 +300,7 @@ def test_a_corrupt_pickle_is_unreadable_not_code(tmp_path: Path) -> None:
 # ----------------------------------------------------------------------------- 4 resume after SIGKILL
 _KILLED_RUN = """
 import os, signal, sys, json
-from fignet_gym.train import training
+from fignet_gym.train import trainer as training
 kill_at = int(sys.argv[3])
 orig = training.Trainer.validate
 def validate(self, writer=None):
@@ -334,7 +337,7 @@ def test_resume_after_sigkill_is_exact(push_file: Path, tmp_path: Path) -> None:
     """A run SIGKILLed between checkpoints (after a new best and its records) and resumed ends
     with the uninterrupted run's curve, TensorBoard steps and best.pt (was: duplicated steps in
     curve.jsonl, best.pt from discarded steps, a stale last.pt.tmp)."""
-    from fignet_gym.train.training import train_from_files
+    from fignet_gym.train.trainer import train_from_files
 
     straight = tmp_path / "straight"
     train_from_files([str(push_file)], None, "push-cpu", str(straight), overrides=TINY)
@@ -347,7 +350,7 @@ def test_resume_after_sigkill_is_exact(push_file: Path, tmp_path: Path) -> None:
     assert [r["step"] for r in _curve(run)] == [2, 4]
     assert torch.load(run / "last.pt", weights_only=True)["meta"]["train_state"]["step"] == 3
     if (run / "best.pt").exists():  # best.pt only ever holds a checkpointed step
-        assert LearnedSimulator.load_with_meta(run / "best.pt")[1]["valid"]["step"] <= 3
+        assert load_checkpoint_file(run / "best.pt")[1]["valid"]["step"] <= 3
     (run / "last.pt.tmp").write_bytes(b"half a checkpoint")
     p = subprocess.run(args[:-2] + ["-1", json.dumps(TINY), "--resume"], capture_output=True,
                        text=True, env=env, timeout=300)
@@ -355,7 +358,7 @@ def test_resume_after_sigkill_is_exact(push_file: Path, tmp_path: Path) -> None:
     assert _curve(run) == _curve(straight)
     assert _tb_steps(run) == _tb_steps(straight) == [2, 4, 6]
     assert not (run / "last.pt.tmp").exists() and not (run / "best.new.pt").exists()
-    best_k, best_s = (LearnedSimulator.load_with_meta(r / "best.pt") for r in (run, straight))
+    best_k, best_s = (load_checkpoint_file(r / "best.pt") for r in (run, straight))
     assert best_k[1]["valid"]["step"] == best_s[1]["valid"]["step"]
     for (k, a), b in zip(best_k[0].state_dict().items(), best_s[0].state_dict().values(), strict=True):
         assert torch.equal(a, b), k
@@ -367,12 +370,12 @@ def test_a_kill_never_leaves_best_pt_from_discarded_steps(push_file: Path, tmp_p
     from fignet_gym.train.rundir import rewind
 
     sim = LearnedSimulator(SMALL)
-    sim.save(tmp_path / "best.new.pt", meta={"valid": {"step": 5}})
+    save(sim, tmp_path / "best.new.pt", meta={"valid": {"step": 5}})
     rewind(tmp_path, 3)
     assert not (tmp_path / "best.new.pt").exists() and not (tmp_path / "best.pt").exists()
-    sim.save(tmp_path / "best.new.pt", meta={"valid": {"step": 3}})
+    save(sim, tmp_path / "best.new.pt", meta={"valid": {"step": 3}})
     rewind(tmp_path, 3)
-    assert LearnedSimulator.load_with_meta(tmp_path / "best.pt")[1]["valid"]["step"] == 3
+    assert load_checkpoint_file(tmp_path / "best.pt")[1]["valid"]["step"] == 3
 
 
 # ----------------------------------------------------------------------------- 5 one error line
@@ -408,7 +411,7 @@ def test_a_truncated_last_pt_on_resume_names_the_file(push_file: Path, tmp_path:
     """Was: ``OSError: [Errno 22] Invalid argument`` without the file's name."""
     run = tmp_path / "run"
     run.mkdir()
-    LearnedSimulator(SMALL).save(run / "last.pt")
+    save(LearnedSimulator(SMALL), run / "last.pt")
     raw = (run / "last.pt").read_bytes()
     (run / "last.pt").write_bytes(raw[: len(raw) // 2])
     assert main(["train", "--data", str(push_file), "--out", str(run), "--resume"]) == 2
@@ -512,12 +515,12 @@ def test_train_into_an_existing_run_is_refused_unless_force(push_file: Path, tmp
 
 def test_resume_with_another_config_is_refused(push_file: Path, tmp_path: Path,
                                                capsys: pytest.CaptureFixture[str]) -> None:
-    from fignet_gym.train.training import load_run_config
+    from fignet_gym.train.config import load_run_config
 
     run = tmp_path / "run"
     run.mkdir()
     sim_cfg, cfg = load_run_config("push-cpu")
-    LearnedSimulator(SimulatorConfig.from_dict({**sim_cfg, "noise_std": 1e-4})).save(run / "last.pt")
+    save(LearnedSimulator(SimulatorConfig.from_dict(sim_cfg)), run / "last.pt")
     assert main(["train", "--data", str(push_file), "--config", "toss-cpu", "--out", str(run),
                  "--resume"]) == 2
     one_error_line(capsys, "last.pt", "scene_type")

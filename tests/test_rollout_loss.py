@@ -8,7 +8,9 @@ import torch
 
 from fignet_gym.data.format import build_scene, load_trajectories
 from fignet_gym.simulator.geometry import axis_angle_to_quat, kabsch, polar_fit, quat_angle, transform_points
-from fignet_gym.train.training import Trainer, WindowSampler, load_run_config
+from fignet_gym.train.config import load_run_config
+from fignet_gym.train.sampling import WindowSampler
+from fignet_gym.train.trainer import Trainer
 
 TINY = {"simulator.latent_size": 8, "simulator.message_passing_steps": 1,
         "training.batch_size": 2, "training.steps": 6, "training.valid_every": 100,
@@ -74,7 +76,7 @@ def _rollout_trainer(push_file: Path, out: Path, steps: int, unroll_after: int =
     trajs = load_trajectories(push_file)
     sim_cfg, cfg = load_run_config("push-cpu", {**TINY, "training.rollout_steps": steps,
                                                 "training.unroll_after": unroll_after,
-                                                "simulator.noise_std": 0.0, "training.noise_fraction": 0.0})
+                                                "training.noise_std": 0.0, "training.noise_fraction": 0.0})
     return Trainer(sim_cfg, cfg, trajs[:2], trajs[2:], out)
 
 

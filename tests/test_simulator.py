@@ -8,10 +8,14 @@ import numpy as np
 import pytest
 import torch
 
+from fignet_gym.pretrained import load_pretrained
+from fignet_gym.simulator.checkpoint import CHECKPOINT_FORMAT, CheckpointError, save
+from fignet_gym.simulator.checkpoint import load as load_checkpoint_file
 from fignet_gym.simulator.collision import FaceContacts
+from fignet_gym.simulator.config import SimulatorConfig
 from fignet_gym.simulator.geometry import rigid_projection
 from fignet_gym.simulator.graph import FACE_GROUPS, face_edge_features
-from fignet_gym.simulator.model import CheckpointError, LearnedSimulator, SimulatorConfig
+from fignet_gym.simulator.model import LearnedSimulator, TrainingNoise, integrate, inverse_integrate
 from fignet_gym.simulator.scene import Scene
 
 SMALL = SimulatorConfig(latent_size=16, message_passing_steps=2, collision_radius=0.03)
@@ -152,8 +156,8 @@ def test_checkpoint_roundtrip_and_bad_files(tmp_path, push_like_xml: str) -> Non
     sim = LearnedSimulator(SMALL).eval()
     randomize_normalizers(sim, push_like_xml)
     path = tmp_path / "m.pt"
-    sim.save(path, meta={"note": "test"})
-    loaded, meta = LearnedSimulator.load_with_meta(path)
+    save(sim, path, meta={"note": "test"})
+    loaded, meta = load_checkpoint_file(path)
     assert meta == {"note": "test"} and loaded.config == sim.config
     scene, hist = scene_and_history(push_like_xml)
     assert torch.equal(sim.step(scene, hist, hist[-1]), loaded.step(scene, hist, hist[-1]))
@@ -161,23 +165,23 @@ def test_checkpoint_roundtrip_and_bad_files(tmp_path, push_like_xml: str) -> Non
     corrupt = tmp_path / "corrupt.pt"
     corrupt.write_bytes(path.read_bytes()[:200])
     with pytest.raises(CheckpointError, match="corrupt.pt"):
-        LearnedSimulator.load(corrupt)
+        load_pretrained(corrupt)
     foreign = tmp_path / "foreign.pt"
     torch.save({"weights": torch.zeros(3)}, foreign)
     with pytest.raises(CheckpointError, match="not a fignet_gym checkpoint"):
-        LearnedSimulator.load(foreign)
+        load_pretrained(foreign)
     # A pickle that would run code is refused by weights_only loading.
     evil = tmp_path / "evil.pt"
     torch.save({"format": "x", "obj": np.random.default_rng(0)}, evil)
     with pytest.raises(CheckpointError):
-        LearnedSimulator.load(evil)
+        load_pretrained(evil)
     mismatched = tmp_path / "mismatch.pt"
     blob = torch.load(path, weights_only=True)
     blob["config"]["latent_size"] = 32
     del blob["checksum"]  # an unsealed file: the shape check (not the checksum) must refuse it
     torch.save(blob, mismatched)
     with pytest.raises(CheckpointError, match="do not match"):
-        LearnedSimulator.load(mismatched)
+        load_pretrained(mismatched)
 
 
 def mujoco_trajectory(xml: str, steps: int, substeps: int) -> tuple[Scene, torch.Tensor]:
@@ -223,7 +227,7 @@ def test_clip_length_hand_case() -> None:
     assert torch.equal(clip_length(d, 0.0), d)
 
 
-def test_last_block_has_no_dead_weights_and_old_checkpoints_load(tmp_path, push_like_xml: str) -> None:
+def test_last_block_has_no_dead_weights_and_extra_weights_are_refused(tmp_path, push_like_xml: str) -> None:
     sim = LearnedSimulator(SMALL).eval()
     randomize_normalizers(sim, push_like_xml)
     last = len(sim.net.blocks) - 1
@@ -232,26 +236,19 @@ def test_last_block_has_no_dead_weights_and_old_checkpoints_load(tmp_path, push_
     scene, hist = scene_and_history(push_like_xml)
     sim.net(sim.normalize(sim.build_inputs(scene, hist, hist[-1]).graph)).sum().backward()
     assert all(p.grad is not None for p in sim.net.parameters())
-    # A checkpoint of the older layout, which still carried those weights, loads to the same model.
-    old = tmp_path / "old.pt"
-    sim.save(old)
-    blob = torch.load(old, weights_only=True)
-    del blob["checksum"]  # that layout predates content checksums
-    first = f"net.blocks.{last - 1}."
-    for key in [k for k in blob["state_dict"] if k.startswith((first + "mesh_obj.", first + "obj_node."))]:
-        blob["state_dict"][key.replace(first, f"net.blocks.{last}.")] = blob["state_dict"][key].clone()
-    torch.save(blob, old)
-    loaded = LearnedSimulator.load(old)
-    assert torch.equal(sim.step(scene, hist, hist[-1]), loaded.step(scene, hist, hist[-1]))
-    # Other unexpected weights still mean a mismatched file.
+    # Unexpected weights mean a mismatched file.
+    path = tmp_path / "extra.pt"
+    save(sim, path)
+    blob = torch.load(path, weights_only=True)
+    del blob["checksum"]  # an unsealed file: the shape check (not the checksum) must refuse it
     blob["state_dict"]["net.extra.weight"] = torch.zeros(2)
-    torch.save(blob, old)
+    torch.save(blob, path)
     with pytest.raises(CheckpointError, match="do not match"):
-        LearnedSimulator.load(old)
+        load_pretrained(path)
 
 
 def test_warm_start_onto_new_face_features_keeps_the_function(push_like_xml: str) -> None:
-    from fignet_gym.train.training import warm_start
+    from fignet_gym.train.warmstart import warm_start
 
     source = LearnedSimulator(SMALL).eval()
     randomize_normalizers(source, push_like_xml)
@@ -276,8 +273,8 @@ def test_rigid_training_noise_has_the_configured_scales(push_like_xml: str) -> N
     scene, hist = scene_and_history(push_like_xml)
     gen = torch.Generator().manual_seed(0)
     for rot_std, expect_rot in ((0.0, None), (0.01, 0.01)):
-        sim = LearnedSimulator(replace(SMALL, noise_std=1e-3, rotation_noise_std=rot_std))
-        draws = torch.stack([sim.pose_noise(scene, hist, gen) for _ in range(1500)])  # [S, H, O, 7]
+        sim, noise = LearnedSimulator(SMALL), TrainingNoise(std=1e-3, rotation_std=rot_std)
+        draws = torch.stack([sim.pose_noise(scene, hist, gen, noise) for _ in range(1500)])  # [S, H, O, 7]
         dyn = scene.dynamic_mask
         assert torch.equal(draws[:, :, ~dyn], hist[None, :, ~dyn].expand_as(draws[:, :, ~dyn]))
         assert torch.allclose(draws[:, 0], hist[0].expand_as(draws[:, 0]), atol=1e-6)  # walk starts at 0
@@ -286,7 +283,7 @@ def test_rigid_training_noise_has_the_configured_scales(push_like_xml: str) -> N
         assert com_shift.pow(2).mean().sqrt().item() == pytest.approx(1e-3, rel=0.06)
         rotvec = quat_to_axis_angle(quat_mul(last[..., 3:], quat_conj(hist[-1, dyn, 3:])))
         rot_rms = rotvec.pow(2).mean().sqrt().item()
-        if expect_rot is None:  # default: nodes at the RMS radius move by noise_std
+        if expect_rot is None:  # default: nodes at the RMS radius move by the noise std
             expect_rot = 1e-3 / sim._object_radius(scene)[dyn].item()
         assert rot_rms == pytest.approx(expect_rot, rel=0.06)
 
@@ -313,28 +310,34 @@ def test_rigid_output_predicts_rigid_motion_in_steps_and_in_the_loss(push_like_x
         assert is_rigid(sim.target_norm.inverse(sim.training_prediction(example.graph)))
 
 
-def test_retired_config_keys_load_at_their_old_default_and_refuse_anything_else(tmp_path,
-                                                                              push_like_xml: str) -> None:
-    from fignet_gym.simulator.model import RETIRED_KEYS
-
+def test_training_settings_are_not_model_config_and_format_1_files_are_refused(tmp_path,
+                                                                             push_like_xml: str) -> None:
     sim = LearnedSimulator(SMALL).eval()
-    randomize_normalizers(sim, push_like_xml)
-    path = tmp_path / "old.pt"
-    sim.save(path)
+    path = tmp_path / "m.pt"
+    save(sim, path)
     blob = torch.load(path, weights_only=True)
-    del blob["checksum"]  # an old file: written before checksums (and before the retirement)
-    # A checkpoint written while the experiments existed carried them all, switched off.
-    blob["config"].update(RETIRED_KEYS)
-    torch.save(blob, path)
-    loaded = LearnedSimulator.load(path)
-    assert loaded.config == sim.config
-    scene, hist = scene_and_history(push_like_xml)
-    assert torch.equal(loaded.step(scene, hist, hist[-1]), sim.step(scene, hist, hist[-1]))
-    for key, accepted in RETIRED_KEYS.items():
-        on = tmp_path / f"{key}.pt"
-        torch.save({**blob, "config": {**blob["config"], key: not accepted}}, on)
-        with pytest.raises(CheckpointError, match=f"{key}.pt: config key '{key}' is a retired"):
-            LearnedSimulator.load(on)
+    assert blob["format"] == CHECKPOINT_FORMAT
+    assert not {"noise_std", "rotation_noise_std", "vertical_weight"} & set(blob["config"])
+    with pytest.raises(ValueError, match="unknown config keys"):
+        SimulatorConfig.from_dict({**SMALL.to_dict(), "noise_std": 1e-3})
+    # A file of the first format (training settings in its config) is refused, saying why.
+    old = tmp_path / "old.pt"
+    torch.save({**blob, "format": "fignet_gym.checkpoint/1"}, old)
+    with pytest.raises(CheckpointError, match="old.pt: checkpoint format 'fignet_gym.checkpoint/1'"):
+        load_pretrained(old)
+
+
+def test_integrate_and_inverse_integrate_are_an_exact_pair() -> None:
+    gen = torch.Generator().manual_seed(0)
+    x_prev, x_t, x_next, acc = (torch.randn(50, 3, generator=gen, dtype=torch.float64) for _ in range(4))
+    # Independent truth: constant velocity needs no acceleration; from rest, a lands at x + a.
+    assert torch.allclose(integrate(x_t, x_prev, torch.zeros_like(x_t)), x_t + (x_t - x_prev), atol=1e-12)
+    assert inverse_integrate(x_t + (x_t - x_prev), x_t, x_prev).abs().max() < 1e-12
+    assert torch.allclose(integrate(x_t, x_t, acc), x_t + acc, atol=1e-12)
+    # Round trips, both ways.
+    assert torch.allclose(integrate(x_t, x_prev, inverse_integrate(x_next, x_t, x_prev)), x_next,
+                          atol=1e-12)
+    assert torch.allclose(inverse_integrate(integrate(x_t, x_prev, acc), x_t, x_prev), acc, atol=1e-12)
 
 
 def test_face_groups_are_config_flags_and_set_the_feature_width(push_like_xml: str) -> None:

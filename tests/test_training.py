@@ -11,15 +11,10 @@ import torch
 
 from fignet_gym.data.format import load_trajectories
 from fignet_gym.data.generate import iter_trajectories
-from fignet_gym.train import training
-from fignet_gym.train.training import (
-    TrainConfig,
-    Trainer,
-    load_run_config,
-    mirror_asymmetric,
-    mirror_y,
-    rotate_about_z,
-)
+from fignet_gym.train import trainer as training
+from fignet_gym.train.config import TrainConfig, load_run_config
+from fignet_gym.train.sampling import WindowSampler, mirror_asymmetric, mirror_y, rotate_about_z
+from fignet_gym.train.trainer import Trainer
 
 TINY = {"simulator.latent_size": 8, "simulator.message_passing_steps": 1,
         "training.batch_size": 2, "training.steps": 6, "training.valid_every": 100,
@@ -55,14 +50,24 @@ def test_resume_after_interruption_continues_exactly(push_file: Path, tmp_path: 
 def test_two_data_parallel_processes_stay_identical(push_file: Path, tmp_path: Path) -> None:
     # torchrun with two CPU processes (gloo); the trainer raises if the replicas drift apart.
     sets = json.dumps({**TINY, "training.steps": 3})
+    train = ["-m", "fignet_gym", "train", "--data", str(push_file), "--config", "push-cpu",
+             "--set", sets, "--out"]
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
-           "-m", "fignet_gym", "train", "--data", str(push_file), "--config", "push-cpu",
-           "--out", str(tmp_path / "ddp"), "--set", sets]
+           *train, str(tmp_path / "ddp")]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]
-    state = torch.load(tmp_path / "ddp" / "last.pt", weights_only=True)["meta"]["train_state"]
+    ddp = torch.load(tmp_path / "ddp" / "last.pt", weights_only=True)
+    state = ddp["meta"]["train_state"]
     assert state["step"] == 3 and state["graphs_seen"] == 3 * 2 * 2
     assert json.loads((tmp_path / "ddp" / "config.json").read_text())["processes"] == 2
+    # Rank 0 draws the windows a single process with the same seed draws; rank 1's gradients
+    # enter the average, so the weights differ from that single process's.
+    single = subprocess.run([sys.executable, *train, str(tmp_path / "one")], capture_output=True,
+                            text=True, timeout=300)
+    assert single.returncode == 0, single.stderr[-3000:]
+    one = torch.load(tmp_path / "one" / "last.pt", weights_only=True)["state_dict"]
+    moved = [k for k, v in ddp["state_dict"].items() if v.is_floating_point() and not torch.equal(v, one[k])]
+    assert any(k.startswith("net.") for k in moved)
 
 
 def test_rotation_about_z_keeps_heights_and_relative_geometry() -> None:
@@ -148,19 +153,10 @@ def test_unknown_training_keys_are_rejected() -> None:
     assert np.isfinite(TrainConfig().lr)
 
 
-def test_retired_training_keys_load_at_their_old_default_only() -> None:
-    from fignet_gym.train.training import RETIRED_TRAINING_KEYS
-
-    for key, accepted in RETIRED_TRAINING_KEYS.items():
-        assert TrainConfig.from_dict({key: accepted, "steps": 7}) == TrainConfig(steps=7)
-        with pytest.raises(ValueError, match=f"'{key}' is a retired"):
-            TrainConfig.from_dict({key: accepted + 3.0})
-
-
 def test_pushforward_feeds_the_models_own_rollout(push_file: Path, tmp_path: Path) -> None:
     trajs = load_trajectories(push_file)
     sim_cfg, cfg = load_run_config("push-cpu", {**TINY, "training.unroll_steps": 3,
-                                                "simulator.noise_std": 0.0, "training.noise_fraction": 0.0})
+                                                "training.noise_std": 0.0, "training.noise_fraction": 0.0})
     trainer = Trainer(sim_cfg, cfg, trajs[:2], trajs[2:], tmp_path / "pf")
     with torch.no_grad():
         for p in trainer.sim.net.parameters():  # zero network: every object keeps its velocity
@@ -206,7 +202,6 @@ def test_pushforward_waits_for_unroll_after(push_file: Path, tmp_path: Path) -> 
 
 def test_sampler_weights_still_windows_near_motion_above_other_still_windows(push_file: Path) -> None:
     from fignet_gym.data.format import build_scene
-    from fignet_gym.train.training import WindowSampler
 
     traj = load_trajectories(push_file)[0]
     scene = build_scene(traj)

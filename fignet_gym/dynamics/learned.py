@@ -20,7 +20,7 @@ from fignet_gym.dynamics.base import (
     DynamicsBase,
     set_mocap,
 )
-from fignet_gym.pretrained import load_checkpoint
+from fignet_gym.pretrained import load_pretrained
 from fignet_gym.simulator.geometry import (
     ShapeMatchError,
     axis_angle_to_quat,
@@ -141,7 +141,7 @@ class FIGNetDynamics(DynamicsBase):
     ) -> None:
         if precision is not None and precision not in PRECISIONS:
             raise ValueError(f"precision must be one of {sorted(PRECISIONS)}, got {precision!r}")
-        sim = load_checkpoint(checkpoint, map_location=device)
+        sim = load_pretrained(checkpoint, map_location=device)
         self.simulator = sim.eval()
         if precision is not None:
             self.simulator.inference_dtype = PRECISIONS[precision]

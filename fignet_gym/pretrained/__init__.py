@@ -1,5 +1,5 @@
 """Pretrained simulators shipped inside the package, and the one route from a name or a path to a
-checkpoint that every entry point (envs, dynamics, CLI, training) takes."""
+simulator that every entry point (envs, dynamics, CLI, training) takes: :func:`load_pretrained`."""
 
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ from pathlib import Path
 
 import torch
 
-from fignet_gym.simulator.model import CheckpointError, LearnedSimulator
+from fignet_gym.simulator.checkpoint import CheckpointError, check_regular_file, load
+from fignet_gym.simulator.model import LearnedSimulator
 
 
 def pretrained_dir() -> Path:
@@ -18,7 +19,7 @@ def pretrained_dir() -> Path:
 
 
 def available_pretrained() -> list[str]:
-    """Names accepted by :func:`load_pretrained`."""
+    """Names of the shipped simulators accepted by :func:`load_pretrained`."""
     return sorted(p.stem for p in pretrained_dir().glob("*.pt"))
 
 
@@ -31,17 +32,12 @@ def pretrained_path(name: str) -> Path:
     return path
 
 
-def load_pretrained(name: str, map_location: str | torch.device = "cpu") -> LearnedSimulator:
-    """Load a shipped simulator (see :func:`available_pretrained`) in eval mode; its model card
-    ``fignet_gym/pretrained/<name>.md`` gives data, training budget and scores."""
-    return LearnedSimulator.load(pretrained_path(name), map_location)
-
-
-def resolve_checkpoint(spec: str | os.PathLike) -> Path:
+def _resolve(spec: str | os.PathLike) -> Path:
     """The checkpoint file a user means: a pretrained name (``"push"``) or a path.
 
     A string that names a shipped model and is not an existing file is that model; anything else
-    is a path, which must exist (``CheckpointError`` naming it and the pretrained names).
+    is a path, which must be a regular file (``CheckpointError`` naming it, what it is instead,
+    and the pretrained names when it does not exist).
     """
     text = os.fspath(spec)
     path = Path(text)
@@ -49,21 +45,21 @@ def resolve_checkpoint(spec: str | os.PathLike) -> Path:
         return path
     if text in available_pretrained():
         return pretrained_path(text)
-    if path.exists():
-        raise CheckpointError(f"{text}: is a directory, not a checkpoint file")
+    if os.path.lexists(text):
+        return check_regular_file(path)  # a directory, device, FIFO or socket: says which
     raise CheckpointError(
         f"{text}: no such checkpoint file, and not a pretrained name "
         f"({', '.join(available_pretrained()) or 'none shipped'})"
     )
 
 
-def load_checkpoint(
+def load_pretrained(
     spec: str | os.PathLike | LearnedSimulator, map_location: str | torch.device | None = None
 ) -> LearnedSimulator:
-    """A :class:`LearnedSimulator` from a pretrained name, a checkpoint path or a simulator.
-
-    A simulator is returned as is (moved to ``map_location`` when given); names and paths are
-    resolved by :func:`resolve_checkpoint` and loaded in eval mode.
+    """A :class:`LearnedSimulator` in eval mode from a shipped name (:func:`available_pretrained`;
+    its model card ``fignet_gym/pretrained/<name>.md`` gives data, training budget and scores) or a
+    checkpoint file. A simulator is returned as is (moved to ``map_location`` when given), so
+    callers may take any of the three. Raises ``CheckpointError`` with one line naming the file.
     """
     if isinstance(spec, LearnedSimulator):
         return spec.to(map_location) if map_location is not None else spec
@@ -71,4 +67,4 @@ def load_checkpoint(
         raise TypeError(
             f"checkpoint must be a pretrained name, a path or a LearnedSimulator, got {type(spec).__name__}"
         )
-    return LearnedSimulator.load(resolve_checkpoint(spec), map_location or "cpu")
+    return load(_resolve(spec), map_location or "cpu")[0]

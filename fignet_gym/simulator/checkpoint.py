@@ -1,20 +1,21 @@
-"""Checkpoint files: reading them safely, sealing them with a content checksum.
+"""Checkpoint files: :func:`save` seals a simulator with a content checksum, :func:`load` reads one
+back safely.
 
-Every route that reads a checkpoint (:meth:`LearnedSimulator.load`, ``--resume``, ``ship``,
-``evaluate``, the envs) goes through :func:`read_checkpoint`, which refuses, with a
-:class:`~fignet_gym.simulator.model.CheckpointError` naming the file, anything that is not exactly
-what :meth:`LearnedSimulator.save` wrote:
+Every route that reads a checkpoint (``fignet_gym.load_pretrained``, ``--resume``, ``ship``,
+``evaluate``, the envs) goes through :func:`load`, which refuses, with a :class:`CheckpointError`
+naming the file, anything that is not exactly what :func:`save` wrote:
 
 1. the file is unpickled with ``weights_only=True`` (never executes code); a file holding other
    Python objects is refused as such (torch's advice to retry with ``weights_only=False`` is not
    passed on: that would run the payload);
-2. the structure (format tag, ``config`` dict, ``state_dict`` of named tensors, ``meta`` dict);
+2. the structure (format tag :data:`CHECKPOINT_FORMAT`, ``config`` dict, ``state_dict`` of named
+   tensors, ``meta`` dict);
 3. the content checksum written at save time (SHA-256 over config, weights and metadata), which
    catches flipped bytes the zip container does not; a file without one (written before the
    checksum existed) loads with a warning: :func:`add_checksum` re-saves it sealed;
-4. the config's bounds (:data:`CONFIG_BOUNDS`), checked before any module is built, so a config
-   asking for ``10**7`` processor blocks or a 200 000 wide latent is refused at once instead of
-   exhausting memory;
+4. the config's bounds (:data:`~fignet_gym.simulator.config.CONFIG_BOUNDS`), checked before any
+   module is built, so a config asking for ``10**7`` processor blocks or a 200 000 wide latent is
+   refused at once instead of exhausting memory;
 5. every weight's name and shape against those of the model the config describes (built on
    PyTorch's ``meta`` device: no memory), and every floating weight finite.
 """
@@ -22,82 +23,32 @@ what :meth:`LearnedSimulator.save` wrote:
 from __future__ import annotations
 
 import hashlib
-import math
 import os
 import pickle
+import stat
 import warnings
-from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
 import torch
 from torch import Tensor
 
-from fignet_gym.simulator.model import (
-    CHECKPOINT_FORMAT,
-    CheckpointError,
-    LearnedSimulator,
-    SimulatorConfig,
-)
+from fignet_gym.simulator.config import SimulatorConfig
+from fignet_gym.simulator.model import LearnedSimulator
 
-#: Inclusive ``(low, high)`` bounds of numeric config fields (the paper's model: history 2,
-#: latent 128, 10 blocks). Anything outside is refused in checkpoints and new configs alike.
-CONFIG_BOUNDS: dict[str, tuple[float, float]] = {
-    "dt": (1e-6, 10.0),
-    "history": (1, 16),
-    "latent_size": (1, 4096),
-    "hidden_size": (1, 8192),
-    "message_passing_steps": (1, 64),
-    "collision_radius": (1e-6, 100.0),
-    "feature_clip": (0.0, 1e4),
-    "noise_std": (0.0, 100.0),
-    "rotation_noise_std": (0.0, 10.0),
-    "vertical_weight": (0.0, 1e6),
-}
-#: Bounds of the mesh options (each level multiplies node counts, so they are kept small).
-MESH_BOUNDS: dict[str, tuple[float, float]] = {
-    "sphere_subdivisions": (0, 5),
-    "cylinder_sections": (3, 256),
-    "capsule_rings": (1, 64),
-    "box_subdivisions": (0, 5),
-    "plane_half_size": (1e-3, 1e5),
-    "plane_cells": (1, 256),
-}
+#: Format tag of the files :func:`save` writes. Format 1 kept training settings (noise, a loss
+#: weight) in the model config; it is refused with a message saying so.
+CHECKPOINT_FORMAT = "fignet_gym.checkpoint/2"
+_OLD_FORMATS = ("fignet_gym.checkpoint/1",)
 CHECKSUM_KEY = "checksum"
+
+
+class CheckpointError(ValueError):
+    """A checkpoint file is missing, corrupt, foreign, or does not match the requested model."""
 
 
 class CheckpointWarning(UserWarning):
     """A checkpoint loads but lacks something a current one has (its content checksum)."""
-
-
-def check_config(config: SimulatorConfig) -> None:
-    """``ValueError`` naming the first field of ``config`` of the wrong type or out of bounds."""
-    def check(name: str, value: Any, lo: float, hi: float, integer: bool) -> None:
-        if integer and (isinstance(value, bool) or not isinstance(value, int)):
-            raise ValueError(f"{name} must be an integer, got {value!r}")
-        if not integer and (isinstance(value, bool) or not isinstance(value, (int, float))):
-            raise ValueError(f"{name} must be a number, got {value!r}")
-        if not (math.isfinite(value) and lo <= value <= hi):
-            raise ValueError(f"{name} must be in [{lo:g}, {hi:g}], got {value!r}")
-
-    ints = {"history", "latent_size", "hidden_size", "message_passing_steps"}
-    for name, (lo, hi) in CONFIG_BOUNDS.items():
-        value = getattr(config, name)
-        if name == "hidden_size" and value is None:
-            continue
-        check(name, value, lo, hi, name in ints)
-    if len(config.gravity) != 3:
-        raise ValueError(f"gravity must have 3 entries, got {config.gravity!r}")
-    for g in config.gravity:
-        check("gravity", g, -1e3, 1e3, False)
-    for f in fields(SimulatorConfig):
-        if f.type in ("bool", bool) and not isinstance(getattr(config, f.name), bool):
-            raise ValueError(f"{f.name} must be true or false, got {getattr(config, f.name)!r}")
-    if not isinstance(config.scene_type, str):
-        raise ValueError(f"scene_type must be a string, got {config.scene_type!r}")
-    mo = config.mesh_options
-    for name, (lo, hi) in MESH_BOUNDS.items():
-        check(f"mesh_options.{name}", getattr(mo, name), lo, hi, name != "plane_half_size")
 
 
 # ----------------------------------------------------------------------------- checksum
@@ -130,7 +81,7 @@ def content_checksum(blob: dict[str, Any]) -> str:
 
 
 def seal(blob: dict[str, Any]) -> dict[str, Any]:
-    """``blob`` with its content checksum (what :meth:`LearnedSimulator.save` writes)."""
+    """``blob`` with its content checksum (what :func:`save` writes)."""
     return {**blob, CHECKSUM_KEY: content_checksum(blob)}
 
 
@@ -157,17 +108,36 @@ def _unpickle(path: Path, map_location: str | torch.device) -> Any:
                               f"written by torch.save: {first})") from None
 
 
-def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = "cpu"
-                    ) -> tuple[SimulatorConfig, dict[str, Tensor], dict[str, Any]]:
-    """Validated ``(config, state_dict, meta)`` of a checkpoint file (see the module docstring).
-
-    The state dict is already upgraded (:meth:`LearnedSimulator.upgrade_state_dict`) and matches
-    ``LearnedSimulator(config)`` in every name and shape. Raises ``CheckpointError``.
-    """
+def check_regular_file(path: str | os.PathLike) -> Path:
+    """``path`` as a ``Path`` if it is a regular file, else a one-line ``CheckpointError`` saying
+    what it is (missing, a directory, or a device, FIFO or socket, which reading would block on or
+    never finish)."""
     path = Path(path)
-    if not path.is_file():
-        raise CheckpointError(f"{path}: no such checkpoint file")
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise CheckpointError(f"{path}: no such checkpoint file") from None
+    except OSError as exc:
+        raise CheckpointError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+    if stat.S_ISDIR(mode):
+        raise CheckpointError(f"{path}: is a directory, not a checkpoint file")
+    if not stat.S_ISREG(mode):
+        kind = ("a FIFO" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode)
+                else "a device")
+        raise CheckpointError(f"{path}: is {kind}, not a regular checkpoint file")
+    return path
+
+
+def _read(path: str | os.PathLike, map_location: str | torch.device = "cpu"
+          ) -> tuple[SimulatorConfig, dict[str, Tensor], dict[str, Any]]:
+    """Validated ``(config, state_dict, meta)`` of a checkpoint file (see the module docstring);
+    the state dict matches ``LearnedSimulator(config)`` in every name and shape."""
+    path = check_regular_file(path)
     blob = _unpickle(path, map_location)
+    if isinstance(blob, dict) and blob.get("format") in _OLD_FORMATS:
+        raise CheckpointError(f"{path}: checkpoint format {blob['format']!r} (training settings in "
+                              f"the model config) is no longer read; this version reads "
+                              f"{CHECKPOINT_FORMAT!r}")
     if not isinstance(blob, dict) or blob.get("format") != CHECKPOINT_FORMAT:
         raise CheckpointError(f"{path}: not a fignet_gym checkpoint (format tag missing)")
     for key, kind in (("config", dict), ("state_dict", dict), ("meta", dict)):
@@ -189,30 +159,48 @@ def read_checkpoint(path: str | os.PathLike, map_location: str | torch.device = 
     bad = [k for k, v in state.items() if not isinstance(k, str) or not isinstance(v, Tensor)]
     if bad:
         raise CheckpointError(f"{path}: state_dict entry {bad[0]!r} is not a named tensor")
-    state = check_state_dict(config, state, path)
+    check_state_dict(config, state, path)
     return config, state, dict(blob.get("meta", {}))
+
+
+def load(path: str | os.PathLike, map_location: str | torch.device = "cpu"
+         ) -> tuple[LearnedSimulator, dict[str, Any]]:
+    """The simulator (in eval mode) and metadata dictionary of a checkpoint file written by
+    :func:`save`; never executes code (``weights_only=True``). Raises ``CheckpointError``.
+
+    This is the file layer; users load names and paths with ``fignet_gym.load_pretrained``."""
+    config, state, meta = _read(path, map_location)
+    sim = LearnedSimulator(config)
+    sim.load_state_dict(state)
+    sim.to(map_location).eval()
+    return sim, meta
+
+
+def save(sim: LearnedSimulator, path: str | os.PathLike, meta: dict[str, Any] | None = None) -> None:
+    """Write ``sim``'s weights, normalisers and config, with ``meta`` (plain values and tensors),
+    atomically (temporary file, then rename) and sealed with a content checksum."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(seal({"format": CHECKPOINT_FORMAT, "config": sim.config.to_dict(),
+                     "state_dict": sim.state_dict(), "meta": meta or {}}), tmp)
+    tmp.replace(path)
 
 
 def config_from_dict(d: dict[str, Any], path: str | os.PathLike = "checkpoint") -> SimulatorConfig:
     """A bounded :class:`SimulatorConfig` from a checkpoint's config, else ``CheckpointError``."""
     try:
         config = SimulatorConfig.from_dict(d)
-        check_config(config)
-    except CheckpointError as exc:  # already says "config key ..."
-        raise CheckpointError(f"{path}: {exc}") from None
     except (TypeError, ValueError, AttributeError) as exc:
         raise CheckpointError(f"{path}: config: {exc}") from None
     return config
 
 
 def check_state_dict(config: SimulatorConfig, state: dict[str, Tensor],
-                     path: str | os.PathLike = "checkpoint") -> dict[str, Tensor]:
-    """``state`` upgraded and checked against ``LearnedSimulator(config)``: same names, same
-    shapes, finite floating values; ``CheckpointError`` naming the first difference."""
+                     path: str | os.PathLike = "checkpoint") -> None:
+    """Check ``state`` against ``LearnedSimulator(config)``: same names, same shapes, finite
+    floating values; ``CheckpointError`` naming the first difference."""
     with torch.device("meta"):
-        ref = LearnedSimulator(config)
-    state = ref.upgrade_state_dict(state)
-    want = ref.state_dict()
+        want = LearnedSimulator(config).state_dict()
     missing, extra = sorted(set(want) - set(state)), sorted(set(state) - set(want))
     if missing or extra:
         raise CheckpointError(
@@ -228,7 +216,6 @@ def check_state_dict(config: SimulatorConfig, state: dict[str, Tensor],
         if t.is_floating_point() and not bool(torch.isfinite(t).all()):
             n = int((~torch.isfinite(t)).sum())
             raise CheckpointError(f"{path}: weight {key!r} has {n} NaN or infinite values")
-    return state
 
 
 def add_checksum(path: str | os.PathLike, dest: str | os.PathLike | None = None) -> Path:
@@ -241,7 +228,7 @@ def add_checksum(path: str | os.PathLike, dest: str | os.PathLike | None = None)
     path = Path(path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", CheckpointWarning)
-        read_checkpoint(path)
+        _read(path)
     blob = _unpickle(path, "cpu")
     out = Path(dest) if dest is not None else path
     tmp = out.with_name(out.name + ".tmp")

@@ -10,9 +10,7 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import asdict, dataclass, field, fields
-from pathlib import Path
-from typing import Any
+from dataclasses import dataclass, fields
 
 import torch
 from torch import Tensor, nn
@@ -24,6 +22,7 @@ from fignet_gym.simulator.collision import (
     no_node_edges,
     node_collision_edges,
 )
+from fignet_gym.simulator.config import SimulatorConfig
 from fignet_gym.simulator.geometry import (
     axis_angle_to_quat,
     kabsch,
@@ -35,128 +34,45 @@ from fignet_gym.simulator.geometry import (
     rigid_projection,
     segment_sum,
 )
-from fignet_gym.simulator.graph import FaceGroup, Graph, build_graph, enabled_face_groups, feature_sizes
+from fignet_gym.simulator.graph import Graph, build_graph, feature_sizes
 from fignet_gym.simulator.networks import EncodeProcessDecode
 from fignet_gym.simulator.normalization import Normalizer
-from fignet_gym.simulator.scene import MeshOptions, Scene
+from fignet_gym.simulator.scene import Scene
 
-CHECKPOINT_FORMAT = "fignet_gym.checkpoint/1"
-
-# Settings of retired experiments (no gain measured: docs/experiments.md) and the one value each
-# still accepts, so that checkpoints and configs written while they existed keep loading.
-RETIRED_KEYS: dict[str, Any] = {
-    "kinematic_receivers": False,
-    "contact_lever": False,
-    "free_flight": False,
-    "ballistic_separation": False,
-}
+#: Smallest RMS object radius (m) the default rotational noise is scaled by: a one-node object
+#: would otherwise get an infinite rotation.
+MIN_OBJECT_RADIUS = 1e-4
+#: Floor of an object's summed squared node distances (m^2) in :func:`rigid_terms` (a
+#: degenerate one-node object has no rotational part).
+_TINY_SQUARED_RADIUS = 1e-12
 
 
-class CheckpointError(ValueError):
-    """A checkpoint file is missing, corrupt, foreign, or does not match the requested model."""
+def integrate(x_t: Tensor, x_prev: Tensor, acc: Tensor) -> Tensor:
+    """Second-order Euler (Verlet) step of positions ``float[..., 3]``: the next position from the
+    current ``x_t``, the previous ``x_prev`` and the finite-difference acceleration ``acc`` (m per
+    step^2). Exact inverse: :func:`inverse_integrate`."""
+    return 2 * x_t - x_prev + acc
+
+
+def inverse_integrate(x_next: Tensor, x_t: Tensor, x_prev: Tensor) -> Tensor:
+    """The acceleration ``float[..., 3]`` (m per step^2) that :func:`integrate` turns into
+    ``x_next``: the training target of a step from ``x_prev``, ``x_t``."""
+    return x_next - 2 * x_t + x_prev
 
 
 @dataclass(frozen=True)
-class SimulatorConfig:
-    """Everything that defines a learned simulator (saved in every checkpoint).
+class TrainingNoise:
+    """The random-walk noise added to a training example's input poses (a training setting, not
+    part of the model).
 
     Attributes:
-        dt: learned step length (s); a property of the training data.
-        history: number of finite-difference velocities in the node features (``H = history + 1`` poses).
-        latent_size: width of every latent vector.
-        hidden_size: width of MLP hidden layers (``None``: ``latent_size``).
-        message_passing_steps: processor blocks (unshared weights).
-        mesh_edges: use mesh-mesh edges (FIGNet* drops them for speed).
-        object_nodes: use one virtual node per object.
-        collision: ``"face"`` (FIGNet face-face hyper-edges) or ``"node"`` (MeshGraphNets node-node).
-        collision_radius: ``d_c`` (m). Face-face edges whose receiver face belongs to a static or
-            kinematic object are dropped: the paper keeps both directions, but those receivers'
-            motion is given anyway, and dropping them halves the edges with the floor and the
-            pusher for the same messages into every dynamic node.
-        feature_clip: length (m) above which face spanning vectors and object-mesh offsets are
-            shortened (0: off, the paper's features). Two-triangle floors have spans of metres
-            beside the centimetres of objects: clipping keeps the small ones visible after
-            normalisation.
-        noise_std: std (m) of the random-walk training noise at the last input frame.
-        rotation_noise_std: std (rad) of its rotational part at the last input frame (0: the
-            rotation that moves nodes at the object's RMS radius by ``noise_std``). A pushed
-            object's angular velocity is set by the contact, not by inertia; rollouts drift in
-            yaw much more than in position, and a model trained with position-sized rotation noise
-            keeps a spurious spin instead of correcting it.
-        vertical_weight: loss weight of the z component of accelerations (1: the paper's plain MSE).
-        gravity: known acceleration (m/s^2) of free dynamic objects. The network predicts the
-            residual ``a - g dt^2``, so free flight is exact from the start and the network's
-            precision is spent on contacts (whose large accelerations set the target scale and so
-            would otherwise limit how precisely it can output the small free-fall term).
-        next_separation: append to face-face features the separation a kinematic sender face
-            will leave after its known next displacement (the ``next_separation`` group of
-            ``graph.FACE_GROUPS``); not in the paper, for contact onsets under a pusher.
-        rigid_output: project the network's node accelerations onto each object's rigid motions
-            (:func:`geometry.rigid_projection`) before the loss and in every step (not in the
-            paper, which shape-matches only in rollouts). The network may then express a contact
-            as a force at the nodes it touches, and the projection turns it into the torque about
-            the centroid analytically, instead of each node having to compute ``alpha x r``.
-        scene_type: what the model was trained on ("push", "toss", ...; "" = unspecified).
-        mesh_options: how MuJoCo primitives are meshed for this model.
+        std: std (m) of the translational noise at the last input frame (0: no noise).
+        rotation_std: std (rad) of the rotational noise at the last input frame (0: the rotation
+            that moves nodes at the object's RMS radius by ``std``).
     """
 
-    dt: float = 0.02
-    history: int = 2
-    latent_size: int = 128
-    hidden_size: int | None = None
-    message_passing_steps: int = 10
-    mesh_edges: bool = True
-    object_nodes: bool = True
-    collision: str = "face"
-    collision_radius: float = 0.02
-    feature_clip: float = 0.0
-    noise_std: float = 0.0
-    rotation_noise_std: float = 0.0
-    vertical_weight: float = 1.0
-    gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    next_separation: bool = False
-    rigid_output: bool = False
-    scene_type: str = ""
-    mesh_options: MeshOptions = field(default_factory=MeshOptions)
-
-    def __post_init__(self) -> None:
-        if self.collision not in ("face", "node"):
-            raise ValueError(f"collision must be 'face' or 'node', got {self.collision!r}")
-        if self.history < 1 or self.dt <= 0 or self.collision_radius <= 0:
-            raise ValueError("history >= 1, dt > 0 and collision_radius > 0 are required")
-        from fignet_gym.simulator.checkpoint import check_config
-
-        check_config(self)  # bounded sizes: a config can never ask for unbounded memory
-
-    @property
-    def face_groups(self) -> tuple[FaceGroup, ...]:
-        """The optional face-edge feature groups this config switches on, in layout order."""
-        return enabled_face_groups(self)
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain-type dictionary (safe for ``torch.load(weights_only=True)``)."""
-        return asdict(self)
-
-    @staticmethod
-    def from_dict(d: dict[str, Any]) -> SimulatorConfig:
-        """Inverse of :meth:`to_dict`; unknown keys are an error, and so is a retired key
-        (:data:`RETIRED_KEYS`) set to anything but the one value it still accepts."""
-        d = dict(d)
-        for key, accepted in RETIRED_KEYS.items():
-            if key in d:
-                if d.pop(key) != accepted:
-                    raise CheckpointError(
-                        f"config key {key!r} is a retired experiment: only {key}={accepted!r} is "
-                        "supported (docs/experiments.md)")
-        known = {f.name for f in fields(SimulatorConfig)}
-        unknown = set(d) - known
-        if unknown:
-            raise CheckpointError(f"unknown config keys {sorted(unknown)}")
-        if "gravity" in d:
-            d["gravity"] = tuple(float(g) for g in d["gravity"])
-        if isinstance(d.get("mesh_options"), dict):
-            d["mesh_options"] = MeshOptions(**d["mesh_options"])
-        return SimulatorConfig(**d)
+    std: float = 0.0
+    rotation_std: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -191,7 +107,7 @@ class TrainingExample:
 
 #: Fewest mesh nodes for which a lower ``inference_dtype`` is used: on smaller graphs (one to ~16
 #: push scenes, one to ~3 toss scenes) bf16 is slower than float32 on this repository's CPUs
-#: (docs/experiments.md, Issue 17), so they run in float32.
+#: (docs/experiments.md, "Speed"), so they run in float32.
 LOW_PRECISION_MIN_NODES = 1024
 
 
@@ -215,7 +131,7 @@ class LearnedSimulator(nn.Module):
         # is not saved). torch.bfloat16 runs a bfloat16 copy of the whole network (matmuls,
         # LayerNorms, sums) on graphs of at least LOW_PRECISION_MIN_NODES nodes, 1.3-1.5x faster
         # per batched scene on CPUs with AVX-512 BF16 or AMX, at a relative error of ~1e-2 in the
-        # accelerations (docs/experiments.md, Issue 17).
+        # accelerations (docs/experiments.md, "Speed").
         self.inference_dtype: torch.dtype = torch.float32
         self._low_precision: tuple[tuple, nn.Module] | None = None
 
@@ -332,12 +248,12 @@ class LearnedSimulator(nn.Module):
 
     @staticmethod
     def _next_nodes(scene: Scene, inputs: StepInputs, acc: Tensor) -> Tensor:
-        """Node positions ``float[N, 3]`` one step on: Verlet with the accelerations ``acc``
-        on dynamic nodes; non-dynamic nodes take their given positions so that their (ignored)
-        fit is well posed."""
-        x_t, x_prev = inputs.node_hist[-1], inputs.node_hist[-2]
+        """Node positions ``float[N, 3]`` one step on: :func:`integrate` with the accelerations
+        ``acc`` on dynamic nodes; non-dynamic nodes take their given positions so that their
+        (ignored) fit is well posed."""
+        x_next = integrate(inputs.node_hist[-1], inputs.node_hist[-2], acc)
         dyn = scene.dynamic_mask[scene.node_object][:, None]
-        return torch.where(dyn, 2 * x_t - x_prev + acc, inputs.node_next)
+        return torch.where(dyn, x_next, inputs.node_next)
 
     @torch.no_grad()
     def rollout(self, scene: Scene, history: Tensor, kinematic: Tensor) -> Tensor:
@@ -353,7 +269,8 @@ class LearnedSimulator(nn.Module):
 
     # ------------------------------------------------------------------ training
     def training_example(self, scene: Scene, poses: Tensor, generator: torch.Generator | None = None,
-                         inputs: Tensor | None = None) -> TrainingExample:
+                         inputs: Tensor | None = None, noise: TrainingNoise | None = None
+                         ) -> TrainingExample:
         """Noisy inputs and the acceleration target for one-step supervision.
 
         Args:
@@ -362,6 +279,7 @@ class LearnedSimulator(nn.Module):
             generator: random source for the training noise.
             inputs: ``float[H, O, 7]`` perturbed history to use instead of adding noise to
                 ``poses[:-1]`` (the model's own rollout, for pushforward training).
+            noise: the training noise added to ``poses[:-1]`` (default: none).
 
         Returns:
             A :class:`TrainingExample` whose target is the acceleration that maps the noisy
@@ -369,34 +287,36 @@ class LearnedSimulator(nn.Module):
             prior.
         """
         hist, nxt = poses[:-1], poses[-1]
-        noisy = inputs if inputs is not None else self.pose_noise(scene, hist, generator)
+        noisy = inputs if inputs is not None else self.pose_noise(scene, hist, generator, noise)
         inputs = self.build_inputs(scene, noisy, nxt)
         x_true_t = scene.node_positions(hist[-1])
         noise_last = inputs.node_hist[-1] - x_true_t
         # The model cannot know the last frame's noise, so the target keeps it; what it must learn
         # is to undo the velocity noise (as in learning_to_simulate).
         target_next = scene.node_positions(nxt) + noise_last
-        target = target_next - 2 * inputs.node_hist[-1] + inputs.node_hist[-2] - self.gravity_step()
+        accel = inverse_integrate(target_next, inputs.node_hist[-1], inputs.node_hist[-2])
+        target = accel - self.gravity_step()
         weight = scene.dynamic_mask[scene.node_object].to(target.dtype)
         return TrainingExample(inputs.graph, target, weight, x_true_t)
 
-    def pose_noise(self, scene: Scene, hist: Tensor, gen: torch.Generator | None) -> Tensor:
+    def pose_noise(self, scene: Scene, hist: Tensor, gen: torch.Generator | None,
+                   noise: TrainingNoise | None = None) -> Tensor:
         """Rigid random-walk noise on dynamic objects' poses: ``float[H, O, 7] -> float[H, O, 7]``.
 
         Noise is rigid (a translation and a rotation about the centre of mass per object and frame)
         because rollouts are shape matched: the errors a model meets at test time are rigid too.
-        The rotation's std is ``rotation_noise_std``, or by default ``noise_std / radius`` so that
-        node displacements are ``~noise_std``. ``noise_std = 0`` turns all noise off.
+        The rotation's std is ``noise.rotation_std``, or by default ``noise.std / radius`` so that
+        node displacements are ``~noise.std``. No ``noise`` (or ``noise.std = 0``) adds none.
         """
-        if self.config.noise_std <= 0:
+        if noise is None or noise.std <= 0:
             return hist
         H, n_obj = hist.shape[0], hist.shape[1]
         walk = math.sqrt(max(H - 1, 1))  # increments add up to the std at the last frame
-        sigma = self.config.noise_std / walk
+        sigma = noise.std / walk
         dev, dt = hist.device, hist.dtype
         dtrans = torch.randn(H - 1, n_obj, 3, generator=gen, device=dev, dtype=dt) * sigma
-        if self.config.rotation_noise_std > 0:
-            rot_sigma = hist.new_full((n_obj,), self.config.rotation_noise_std / walk)
+        if noise.rotation_std > 0:
+            rot_sigma = hist.new_full((n_obj,), noise.rotation_std / walk)
         else:
             rot_sigma = sigma / self._object_radius(scene)
         drot = torch.randn(H - 1, n_obj, 3, generator=gen, device=dev, dtype=dt) * rot_sigma[:, None]
@@ -416,7 +336,7 @@ class LearnedSimulator(nn.Module):
         d2 = ((scene.ref_vertices - scene.object_com[scene.node_object]) ** 2).sum(-1)
         s = segment_sum(d2, scene.node_object, scene.num_objects)
         n = segment_sum(torch.ones_like(d2), scene.node_object, scene.num_objects)
-        return (s / n.clamp_min(1)).sqrt().clamp_min(1e-4)
+        return (s / n.clamp_min(1)).sqrt().clamp_min(MIN_OBJECT_RADIUS)
 
     def training_prediction(self, graph: Graph, accumulate: bool = False) -> Tensor:
         """The network's normalised acceleration prediction ``float[N, 3]`` with gradients, as the
@@ -427,13 +347,15 @@ class LearnedSimulator(nn.Module):
             pred = self.target_norm(self._rigid(self.target_norm.inverse(pred), graph))
         return pred
 
-    def loss(self, example: TrainingExample, rigid_weight: float = 0.0, accumulate: bool = True) -> Tensor:
+    def loss(self, example: TrainingExample, rigid_weight: float = 0.0, accumulate: bool = True,
+             vertical_weight: float = 1.0) -> Tensor:
         """The training loss of one (batched) example: scalar.
 
         The weighted MSE of normalised accelerations over dynamic nodes (z weighted by
-        ``vertical_weight``), plus ``rigid_weight`` times the per-object linear and rotational
-        acceleration terms (:func:`rigid_terms`), which isolate the rotation that a plain per-node
-        MSE lets translation and noise drown (the yaw of a pushed object). ``accumulate`` updates
+        ``vertical_weight``; 1 is the paper's plain MSE), plus ``rigid_weight`` times the
+        per-object linear and rotational acceleration terms (:func:`rigid_terms`), which isolate
+        the rotation that a plain per-node MSE lets translation and noise drown (the yaw of a
+        pushed object). ``accumulate`` updates
         the normalisers' statistics (target first, so that an early loss is already normalised).
         """
         graph, target, weight = example.graph, example.target, example.weight
@@ -442,7 +364,7 @@ class LearnedSimulator(nn.Module):
             norm.accumulate(target[weight > 0])
         pred_n = self.training_prediction(graph, accumulate)
         err = (pred_n - norm(target)) ** 2
-        comp = err.new_tensor([1.0, 1.0, self.config.vertical_weight])
+        comp = err.new_tensor([1.0, 1.0, vertical_weight])
         loss = (err * comp).sum(-1).mul(weight).sum() / (weight.sum() * comp.sum()).clamp_min(1.0)
         if rigid_weight <= 0:
             return loss
@@ -455,44 +377,6 @@ class LearnedSimulator(nn.Module):
         n = live.sum().clamp_min(1)  # a batch may have no dynamic object
         rigid = ((lin_p - lin_t)[live].pow(2).sum() + (ang_p - ang_t)[live].pow(2).sum()) / (3 * n)
         return loss + rigid_weight * rigid
-
-    # ------------------------------------------------------------------ checkpoints
-    def save(self, path: str | Path, meta: dict[str, Any] | None = None) -> None:
-        """Write weights, normalisers and config atomically (temporary file, then rename), sealed
-        with a content checksum (:mod:`fignet_gym.simulator.checkpoint`)."""
-        from fignet_gym.simulator.checkpoint import seal
-
-        path = Path(path)
-        tmp = path.with_name(path.name + ".tmp")
-        torch.save(seal({"format": CHECKPOINT_FORMAT, "config": self.config.to_dict(),
-                         "state_dict": self.state_dict(), "meta": meta or {}}), tmp)
-        tmp.replace(path)
-
-    @staticmethod
-    def load(path: str | Path, map_location: str | torch.device = "cpu") -> LearnedSimulator:
-        """Load a checkpoint written by :meth:`save` (never executes code: ``weights_only=True``)."""
-        sim, _ = LearnedSimulator.load_with_meta(path, map_location)
-        return sim
-
-    @staticmethod
-    def load_with_meta(path: str | Path, map_location: str | torch.device = "cpu"
-                       ) -> tuple[LearnedSimulator, dict[str, Any]]:
-        """:meth:`load` that also returns the checkpoint's metadata dictionary."""
-        from fignet_gym.simulator.checkpoint import read_checkpoint
-
-        config, state, meta = read_checkpoint(path, map_location)  # validated: shapes match
-        sim = LearnedSimulator(config)
-        sim.load_state_dict(state)
-        sim.to(map_location).eval()
-        return sim, meta
-
-    def upgrade_state_dict(self, state: dict[str, Tensor]) -> dict[str, Tensor]:
-        """``state`` without the last processor block's object-update weights, which checkpoints
-        written before that block lost them still carry (they never affected the output)."""
-        last = f"net.blocks.{len(self.net.blocks) - 1}."
-        stale = (last + "mesh_obj.", last + "obj_node.")
-        own = self.state_dict()
-        return {k: v for k, v in state.items() if k in own or not k.startswith(stale)}
 
 
 def _version(t: Tensor) -> int:
@@ -510,5 +394,5 @@ def rigid_terms(pos: Tensor, acc: Tensor, node_object: Tensor, num_objects: int)
     linear in ``acc``, so cheap and differentiable. Returns ``(float[O, 3], float[O, 3])``.
     """
     count, r, lin, torque = rigid_moments(acc, pos, node_object, num_objects)
-    r2 = segment_sum((r * r).sum(-1), node_object, num_objects).clamp_min(1e-12)
+    r2 = segment_sum((r * r).sum(-1), node_object, num_objects).clamp_min(_TINY_SQUARED_RADIUS)
     return lin, torque / r2[:, None] * (r2 / count).sqrt()[:, None]

@@ -21,6 +21,8 @@ import torch
 import trimesh
 from torch import Tensor
 
+from fignet_gym.simulator.geometry import transform_points
+
 #: Most memoised values a scene keeps (:meth:`Scene.cached`).
 CACHE_ENTRIES = 16
 
@@ -422,14 +424,10 @@ class Scene:
 
     def node_positions(self, poses: Tensor) -> Tensor:
         """World node positions. ``float[..., O, 7] -> float[..., N, 3]``."""
-        from fignet_gym.simulator.geometry import transform_points
-
         return transform_points(poses[..., self.node_object, :], self.ref_vertices)
 
     def com_positions(self, poses: Tensor) -> Tensor:
         """World centre-of-mass positions. ``float[..., O, 7] -> float[..., O, 3]``."""
-        from fignet_gym.simulator.geometry import transform_points
-
         return transform_points(poses, self.object_com)
 
     def poses_from_data(self, data: mujoco.MjData) -> np.ndarray:

@@ -31,7 +31,7 @@ import torch
 
 from fignet_gym.dynamics.learned import CHUNK_NODES, PRECISIONS, batched_step
 from fignet_gym.mjcf import TossObject, push_scene_xml, toss_scene_xml
-from fignet_gym.pretrained import load_checkpoint
+from fignet_gym.pretrained import load_pretrained
 from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
 from fignet_gym.simulator.scene import MeshOptions, Scene
 
@@ -218,7 +218,7 @@ def shipped_table(args: argparse.Namespace, dtype: torch.dtype, scenes: list[Ben
           + ("" if dtype == torch.float32 else f" {'x f32 B=1':>9s}"))
     for b in scenes:
         name = b.name.split()[0]
-        sim = load_checkpoint(name).eval()
+        sim = load_pretrained(name).eval()
         # A faster precision is measured against what users get by default: one float32 scene
         # (in float32, the first row's own single scene).
         f32_single = None if dtype == torch.float32 else \

@@ -47,12 +47,12 @@ class Row:
 
 def learned_model(kind: str, checkpoint: str | None) -> tuple[Any, str]:
     """The simulator to benchmark for ``kind`` and a description of where it came from."""
-    from fignet_gym.pretrained import available_pretrained, load_checkpoint, load_pretrained
+    from fignet_gym.pretrained import available_pretrained, load_pretrained
     from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
-    from fignet_gym.train.training import PRESETS
+    from fignet_gym.train.config import PRESETS
 
     if checkpoint:
-        return load_checkpoint(checkpoint), f"checkpoint {checkpoint}"
+        return load_pretrained(checkpoint), f"checkpoint {checkpoint}"
     if kind in available_pretrained():
         return load_pretrained(kind), f"pretrained '{kind}'"
     cfg = SimulatorConfig.from_dict(PRESETS[f"{kind}-cpu"]["simulator"])

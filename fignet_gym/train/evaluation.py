@@ -592,12 +592,12 @@ def evaluate(checkpoint: str, data: str, out: str, num: int | None = None, horiz
     models' median errors, with bootstrap intervals, are printed and stored under ``"against"``.
     """
     from fignet_gym.data.format import load_trajectories
-    from fignet_gym.pretrained import load_checkpoint
+    from fignet_gym.pretrained import load_pretrained
 
     if (num is not None and num < 1) or horizon < 1 or videos < 0:
         raise ValueError(f"evaluate: num and horizon must be >= 1 and videos >= 0, got "
                          f"{num}, {horizon}, {videos}")
-    sim = load_checkpoint(checkpoint)
+    sim = load_pretrained(checkpoint)
     trajs = load_trajectories(data)[:num]
     check_data_matches(sim, trajs, data)
     check_dt(trajs, sim.config.dt)
@@ -606,7 +606,7 @@ def evaluate(checkpoint: str, data: str, out: str, num: int | None = None, horiz
     res = rollout_metrics(sim, trajs, horizon=horizon)
     res.update(checkpoint=str(checkpoint), data=str(data))
     if against is not None:
-        other = load_checkpoint(against)
+        other = load_pretrained(against)
         check_data_matches(other, trajs, data)
         ref = rollout_metrics(other, trajs, horizon=horizon)
         res["against"] = {"checkpoint": str(against), "ratios": paired_ratios(res, ref),

@@ -15,21 +15,21 @@ import os
 from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import torch
 
 from fignet_gym.data.format import Trajectory, build_scene, load_trajectories
-
-if TYPE_CHECKING:
-    from fignet_gym.train.training import TrainConfig
+from fignet_gym.train.config import TrainConfig, load_run_config
+from fignet_gym.train.rundir import RunFolderError, check_resume_config
+from fignet_gym.train.trainer import Trainer
 
 #: Optimiser steps of ``cube-real`` by training-set size (the last entry for anything larger):
 #: a few tosses are learned (and overfitted) sooner, so small sets get fewer steps. Selection on
 #: validation picks the best checkpoint within them. Sized so that a whole ``sim2real`` sweep
 #: (8 .. all of 240 tosses, with validations and MuJoCo's fit) stays within 2 CPU hours on one
-#: core (docs/experiments.md, Issue 14, "Sweep budget").
+#: core (docs/experiments.md, real tosses, "Sweep budget").
 DEFAULT_STEPS: tuple[tuple[int, int], ...] = ((8, 3000), (16, 4000), (32, 5000), (64, 8000),
                                               (128, 12000), (10**9, 20000))
 #: Pushforward starts after this fraction of a run's steps (the ``cube-real`` preset's 5000 of
@@ -41,7 +41,7 @@ UNROLL_AFTER_FRACTION = 0.125
 #: 3000 steps of the sixth round's fine-tunes (whose best checkpoints were at step 1000; 10
 #: steps cost half of 20 and scored within validation noise of them). Selection still runs on
 #: validation and the warm start is validated first, so the base model stays a candidate
-#: (docs/experiments.md, Issue 14, sixth and seventh rounds).
+#: (docs/experiments.md, real tosses: the rollout-loss fine-tunes).
 POLISH_STEPS = 1000
 POLISH_OVERRIDES: dict[str, Any] = {"training.rollout_steps": 10, "training.lr": 1e-4,
                                     "training.lr_final": 4.64e-5, "training.unroll_after": 0}
@@ -68,8 +68,6 @@ def finished_run(done: Path, best: Path, steps: int) -> Path:
     Raises :class:`~fignet_gym.train.rundir.RunFolderError` otherwise: a budget changed between
     calls must not be answered with the old run's results.
     """
-    from fignet_gym.train.rundir import RunFolderError
-
     ran = json.loads(done.read_text()).get("step")
     if ran != steps:
         raise RunFolderError(f"{done.parent}: holds a finished run of {ran} steps, asked for "
@@ -154,9 +152,6 @@ def train_on_split(
     ``simulator.gravity``. Returns
     ``out_dir / "best.pt"``.
     """
-    from fignet_gym.train.rundir import check_resume_config
-    from fignet_gym.train.training import load_run_config
-
     trajs = _trajectories(train, "train")
     valid_trajs = _trajectories(valid, "valid")
     if size is not None:
@@ -202,8 +197,6 @@ def _train(out: Path, sim_cfg: dict[str, Any], cfg: TrainConfig, trajs: list[Tra
            valid: list[Trajectory], init: str | None) -> None:
     """The training of :func:`train_on_split` into ``out`` (resumed if begun); writes
     ``done.json`` when it reaches its last step."""
-    from fignet_gym.train.training import Trainer
-
     out.mkdir(parents=True, exist_ok=True)
     (out / "split.json").write_text(json.dumps(
         {"train": [t.name for t in trajs], "valid": [t.name for t in valid],

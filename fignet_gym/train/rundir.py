@@ -26,8 +26,8 @@ from pathlib import Path
 from typing import Any
 
 from fignet_gym.atomic import write_text
-from fignet_gym.simulator.checkpoint import CheckpointWarning, read_checkpoint
-from fignet_gym.simulator.model import SimulatorConfig
+from fignet_gym.simulator.checkpoint import CheckpointWarning, load
+from fignet_gym.simulator.config import SimulatorConfig
 
 #: What a run writes (``--force`` removes exactly these).
 RUN_FILES = ("last.pt", "best.pt", "best.new.pt", "curve.jsonl", "config.json", "tb")
@@ -73,7 +73,7 @@ def check_resume_config(out: Path, sim_cfg: dict[str, Any], training: dict[str, 
         return
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", CheckpointWarning)
-        stored, _, _ = read_checkpoint(last)
+        stored = load(last)[0].config
     try:
         asked = SimulatorConfig.from_dict({**sim_cfg, "dt": stored.dt})
     except (TypeError, ValueError) as exc:
@@ -125,7 +125,7 @@ def rewind(out: Path, step: int) -> None:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", CheckpointWarning)
-                _, _, meta = read_checkpoint(pending)
+                meta = load(pending)[1]
             at = int(meta.get("valid", {}).get("step", step + 1))
         except (ValueError, TypeError):
             at = step + 1

@@ -12,18 +12,20 @@ import math
 from pathlib import Path
 from typing import Any
 
-from fignet_gym.data.format import build_scene, load_trajectories
+from fignet_gym.data.format import TrajectoryFile, build_scene, load_trajectories
 from fignet_gym.pretrained import pretrained_dir
-from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
+from fignet_gym.simulator.checkpoint import load, save
+from fignet_gym.simulator.config import SimulatorConfig
+from fignet_gym.simulator.model import LearnedSimulator
 from fignet_gym.train.evaluation import check_data_matches, rollout_metrics
-from fignet_gym.train.training import median_node_acceleration
+from fignet_gym.train.sampling import median_node_acceleration
 
 
 def ship(run: str, name: str, data: str, horizon: int, num: int | None = None, dest: str | None = None,
          notes: str = "") -> dict[str, Any]:
     """Export ``run/best.pt`` as ``<dest>/<name>.pt`` and write its model card; returns the metrics."""
     run_dir = Path(run)
-    sim, meta = LearnedSimulator.load_with_meta(run_dir / "best.pt")
+    sim, meta = load(run_dir / "best.pt")
     state = _train_state(run_dir, meta.get("valid", {}))
     trajs = load_trajectories(data)[:num]
     check_data_matches(sim, trajs, data)
@@ -35,7 +37,7 @@ def ship(run: str, name: str, data: str, horizon: int, num: int | None = None, d
     card_meta = {"run": str(run_dir), "validation_at_export": meta.get("valid", {}),
                  "train_state": state, "heldout": {k: v for k, v in metrics.items()
                                                    if not k.endswith("_curve")}}
-    sim.save(out / f"{name}.pt", meta={"model_card": json.dumps(card_meta)})
+    save(sim, out / f"{name}.pt", meta={"model_card": json.dumps(card_meta)})
     (out / f"{name}.md").write_text(model_card(name, sim, state, metrics, data, notes,
                                                source=_data_source(data)))
     print(f"shipped {out / (name + '.pt')} ({(out / (name + '.pt')).stat().st_size / 1e6:.1f} MB)")
@@ -44,17 +46,17 @@ def ship(run: str, name: str, data: str, horizon: int, num: int | None = None, d
 
 def _train_state(run_dir: Path, valid: dict[str, Any]) -> dict[str, Any]:
     """Steps, graphs and CPU hours that produced the exported checkpoint (its validation record),
-    and the run's training settings."""
+    the run's training settings and the noise std it used."""
     cfg_path = run_dir / "config.json"
     cfg = json.loads(cfg_path.read_text()) if cfg_path.is_file() else {}
+    training = cfg.get("training", {})
     return {"steps": valid.get("step"), "graphs_seen": valid.get("graphs_seen"),
-            "cpu_hours": valid.get("cpu_hours"), "training": cfg.get("training", {})}
+            "cpu_hours": valid.get("cpu_hours"), "training": training,
+            "noise_std": cfg.get("noise_std", training.get("noise_std", 0.0))}
 
 
 def _data_source(data: str) -> str:
     """What the card says the data is: real tracked data is named by its importer's source."""
-    from fignet_gym.data.format import TrajectoryFile
-
     with TrajectoryFile(data) as f:
         source = str(f.metadata.get("source", ""))
     if source == "contactnets":
@@ -70,6 +72,8 @@ def model_card(name: str, sim: LearnedSimulator, state: dict[str, Any], m: dict[
     c = sim.config
     n_params = sum(p.numel() for p in sim.parameters())
     tr = state.get("training", {})
+    noise = state.get("noise_std", 0.0)
+    vertical = tr.get("vertical_weight", 1.0)
     generated = (f"MuJoCo-generated `{c.scene_type}` trajectories "
                  "(`fignet-gym generate`, see `docs/data.md`)")
     return f"""# Pretrained simulator `{name}`
@@ -91,11 +95,11 @@ Mesh options: {c.mesh_options}.
 - Budget: {state.get("steps")} optimiser steps of {tr.get("batch_size")} graphs
   ({state.get("graphs_seen")} graphs), {_fmt(state.get("cpu_hours"), 2)} CPU hours on a 2-core
   machine (one core per run).
-- Recipe: per-node acceleration MSE in normalised space (vertical weight {c.vertical_weight}), plus a
+- Recipe: per-node acceleration MSE in normalised space (vertical weight {vertical}), plus a
   per-object linear/rotational acceleration term (weight {tr.get("rigid_loss_weight")}); rigid random-walk
-  input noise std {c.noise_std:.3g} m ({c.noise_std / m["median_node_acceleration"]:.2g} x the median
+  input noise std {noise:.3g} m ({noise / m["median_node_acceleration"]:.2g} x the median
   per-step acceleration of moving nodes in the held-out data, {m["median_node_acceleration"]:.2g} m);
-  rotational noise std {c.rotation_noise_std or "(from the position noise)"} rad; pushforward unrolls
+  rotational noise std {tr.get("rotation_noise_std") or "(from the position noise)"} rad; pushforward unrolls
   of up to {tr.get("unroll_steps", 0)} steps (from step {tr.get("unroll_after", 0)});{_rollout(tr)}
   random rotations about z{"; half of the windows mirrored in y = 0" if tr.get("mirror") else ""};
   Adam, lr {tr.get("lr")} decaying to {tr.get("lr_final")};

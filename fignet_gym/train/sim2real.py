@@ -229,9 +229,9 @@ def run_sim2real(
                 print(f"FIGNet on {label} training trajectories ...")
                 ckpt = train_fn(split_dir / "train.h5", split_dir / "valid.h5", size,
                                 out / f"fignet_{label}")
-                from fignet_gym.pretrained import load_checkpoint
+                from fignet_gym.pretrained import load_pretrained
 
-                sim = load_checkpoint(str(ckpt))
+                sim = load_pretrained(str(ckpt))
                 if sim.config.history + 1 != given:
                     raise Sim2RealError(f"{ckpt}: the model takes {sim.config.history + 1} poses, "
                                         f"the MuJoCo baselines {given}: scores would not compare")

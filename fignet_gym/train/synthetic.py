@@ -5,7 +5,7 @@ scores 12.0 mm at frame 50 on validation; fitted on 64, 11.6 mm), yet are far to
 FIGNet from scratch. So
 ``fignet-gym sim2real --pretrain N`` fits MuJoCo on the real tosses a model may use, re-simulates
 ``N`` tosses started from randomised versions of their release states in the fitted MuJoCo,
-pretrains FIGNet on those and fine-tunes it on the real ones (docs/experiments.md, Issue 14,
+pretrains FIGNet on those and fine-tunes it on the real ones (docs/experiments.md, real tosses,
 "Pretraining on a fitted MuJoCo").
 
 A synthetic toss keeps its source's scene (MJCF, meshes, properties) and length. Its first three
@@ -29,6 +29,7 @@ from tqdm import tqdm
 from fignet_gym.data.format import Trajectory
 from fignet_gym.data.generate import random_quaternion
 from fignet_gym.dynamics.base import Dynamics
+from fignet_gym.dynamics.mujoco import MujocoDynamics
 from fignet_gym.simulator.scene import ObjectKind
 from fignet_gym.train.analytic import ContactParams, Replay, _axis_angle, _conj, _quat_mul
 
@@ -102,8 +103,6 @@ def synthetic_tosses(
     the same arguments give the same tosses. Returns trajectories ``synthetic-<i>`` with their
     source in ``metadata["synthetic_from"]``.
     """
-    from fignet_gym.dynamics.mujoco import MujocoDynamics
-
     if num < 1:
         raise ValueError(f"num must be at least 1, got {num}")
     if not trajs:

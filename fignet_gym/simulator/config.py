@@ -1,0 +1,154 @@
+"""What defines a learned simulator: :class:`SimulatorConfig`, saved in every checkpoint, and the
+bounds every config (new or read from a file) is checked against before any module is built.
+
+Training-only settings (noise, loss weights) are not here: they do not change what a trained
+model computes, so they live in :class:`fignet_gym.train.config.TrainConfig`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+from fignet_gym.simulator.graph import FaceGroup, enabled_face_groups
+from fignet_gym.simulator.scene import MeshOptions
+
+#: Inclusive ``(low, high)`` bounds of numeric config fields (the paper's model: history 2,
+#: latent 128, 10 blocks). Anything outside is refused in checkpoints and new configs alike, so a
+#: config asking for ``10**7`` processor blocks is refused instead of exhausting memory.
+CONFIG_BOUNDS: dict[str, tuple[float, float]] = {
+    "dt": (1e-6, 10.0),
+    "history": (1, 16),
+    "latent_size": (1, 4096),
+    "hidden_size": (1, 8192),
+    "message_passing_steps": (1, 64),
+    "collision_radius": (1e-6, 100.0),
+    "feature_clip": (0.0, 1e4),
+}
+#: Integer fields among :data:`CONFIG_BOUNDS`.
+_INTEGER_FIELDS = frozenset({"history", "latent_size", "hidden_size", "message_passing_steps"})
+#: Bounds of gravity components (m/s^2).
+GRAVITY_BOUND = 1e3
+#: Bounds of the mesh options (each level multiplies node counts, so they are kept small).
+MESH_BOUNDS: dict[str, tuple[float, float]] = {
+    "sphere_subdivisions": (0, 5),
+    "cylinder_sections": (3, 256),
+    "capsule_rings": (1, 64),
+    "box_subdivisions": (0, 5),
+    "plane_half_size": (1e-3, 1e5),
+    "plane_cells": (1, 256),
+}
+
+
+@dataclass(frozen=True)
+class SimulatorConfig:
+    """Everything that defines a learned simulator (saved in every checkpoint).
+
+    Attributes:
+        dt: learned step length (s); a property of the training data.
+        history: number of finite-difference velocities in the node features (``H = history + 1`` poses).
+        latent_size: width of every latent vector.
+        hidden_size: width of MLP hidden layers (``None``: ``latent_size``).
+        message_passing_steps: processor blocks (unshared weights).
+        mesh_edges: use mesh-mesh edges (FIGNet* drops them for speed).
+        object_nodes: use one virtual node per object.
+        collision: ``"face"`` (FIGNet face-face hyper-edges) or ``"node"`` (MeshGraphNets node-node).
+        collision_radius: ``d_c`` (m). Face-face edges whose receiver face belongs to a static or
+            kinematic object are dropped: the paper keeps both directions, but those receivers'
+            motion is given anyway, and dropping them halves the edges with the floor and the
+            pusher for the same messages into every dynamic node.
+        feature_clip: length (m) above which face spanning vectors and object-mesh offsets are
+            shortened (0: off, the paper's features). Two-triangle floors have spans of metres
+            beside the centimetres of objects: clipping keeps the small ones visible after
+            normalisation.
+        gravity: known acceleration (m/s^2) of free dynamic objects. The network predicts the
+            residual ``a - g dt^2``, so free flight is exact from the start and the network's
+            precision is spent on contacts (whose large accelerations set the target scale and so
+            would otherwise limit how precisely it can output the small free-fall term).
+        next_separation: append to face-face features the separation a kinematic sender face
+            will leave after its known next displacement (the ``next_separation`` group of
+            ``graph.FACE_GROUPS``); not in the paper, for contact onsets under a pusher.
+        rigid_output: project the network's node accelerations onto each object's rigid motions
+            (:func:`geometry.rigid_projection`) before the loss and in every step (not in the
+            paper, which shape-matches only in rollouts). The network may then express a contact
+            as a force at the nodes it touches, and the projection turns it into the torque about
+            the centroid analytically, instead of each node having to compute ``alpha x r``.
+        scene_type: what the model was trained on ("push", "toss", ...; "" = unspecified).
+        mesh_options: how MuJoCo primitives are meshed for this model.
+    """
+
+    dt: float = 0.02
+    history: int = 2
+    latent_size: int = 128
+    hidden_size: int | None = None
+    message_passing_steps: int = 10
+    mesh_edges: bool = True
+    object_nodes: bool = True
+    collision: str = "face"
+    collision_radius: float = 0.02
+    feature_clip: float = 0.0
+    gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    next_separation: bool = False
+    rigid_output: bool = False
+    scene_type: str = ""
+    mesh_options: MeshOptions = field(default_factory=MeshOptions)
+
+    def __post_init__(self) -> None:
+        if self.collision not in ("face", "node"):
+            raise ValueError(f"collision must be 'face' or 'node', got {self.collision!r}")
+        if self.history < 1 or self.dt <= 0 or self.collision_radius <= 0:
+            raise ValueError("history >= 1, dt > 0 and collision_radius > 0 are required")
+        check_config(self)  # bounded sizes: a config can never ask for unbounded memory
+
+    @property
+    def face_groups(self) -> tuple[FaceGroup, ...]:
+        """The optional face-edge feature groups this config switches on, in layout order."""
+        return enabled_face_groups(self)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-type dictionary (safe for ``torch.load(weights_only=True)``)."""
+        return asdict(self)
+
+    @staticmethod
+    def from_dict(d: dict[str, Any]) -> SimulatorConfig:
+        """Inverse of :meth:`to_dict`; unknown keys are a ``ValueError``."""
+        d = dict(d)
+        unknown = set(d) - {f.name for f in fields(SimulatorConfig)}
+        if unknown:
+            raise ValueError(f"unknown config keys {sorted(unknown)}")
+        if "gravity" in d:
+            d["gravity"] = tuple(float(g) for g in d["gravity"])
+        if isinstance(d.get("mesh_options"), dict):
+            d["mesh_options"] = MeshOptions(**d["mesh_options"])
+        return SimulatorConfig(**d)
+
+
+def _check_number(name: str, value: Any, lo: float, hi: float, integer: bool) -> None:
+    if integer and (isinstance(value, bool) or not isinstance(value, int)):
+        raise ValueError(f"{name} must be an integer, got {value!r}")
+    if not integer and (isinstance(value, bool) or not isinstance(value, (int, float))):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    if not (math.isfinite(value) and lo <= value <= hi):
+        raise ValueError(f"{name} must be in [{lo:g}, {hi:g}], got {value!r}")
+
+
+def check_config(config: SimulatorConfig) -> None:
+    """``ValueError`` naming the first field of ``config`` of the wrong type or out of bounds."""
+    for name, (lo, hi) in CONFIG_BOUNDS.items():
+        value = getattr(config, name)
+        if name == "hidden_size" and value is None:
+            continue
+        _check_number(name, value, lo, hi, name in _INTEGER_FIELDS)
+    if len(config.gravity) != 3:
+        raise ValueError(f"gravity must have 3 entries, got {config.gravity!r}")
+    for g in config.gravity:
+        _check_number("gravity", g, -GRAVITY_BOUND, GRAVITY_BOUND, False)
+    for f in fields(SimulatorConfig):
+        if f.type in ("bool", bool) and not isinstance(getattr(config, f.name), bool):
+            raise ValueError(f"{f.name} must be true or false, got {getattr(config, f.name)!r}")
+    if not isinstance(config.scene_type, str):
+        raise ValueError(f"scene_type must be a string, got {config.scene_type!r}")
+    mo = config.mesh_options
+    for name, (lo, hi) in MESH_BOUNDS.items():
+        _check_number(f"mesh_options.{name}", getattr(mo, name), lo, hi, name != "plane_half_size")
