@@ -79,7 +79,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _floor(args: argparse.Namespace) -> int:
-    from fignet_gym.train.evaluation import floor_table
+    from fignet_gym.train.floor import floor_table
 
     floor_table(args.data, args.noise, out=args.out, num=args.num, horizon=args.horizon,
                 history=args.history)

@@ -15,7 +15,8 @@ from typing import Any
 from fignet_gym.data.format import build_scene, load_trajectories
 from fignet_gym.pretrained import pretrained_dir
 from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
-from fignet_gym.train.evaluation import check_data_matches, rollout_metrics
+from fignet_gym.train.data_checks import check_data_matches
+from fignet_gym.train.evaluation import rollout_metrics
 from fignet_gym.train.training import median_node_acceleration
 
 
