@@ -4,6 +4,7 @@ import json
 import math
 from dataclasses import replace
 from pathlib import Path
+from tempfile import TemporaryDirectory
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from fignet_gym.data.tracked import import_contactnets
 from fignet_gym.simulator.geometry import quat_mul
 from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
 from fignet_gym.simulator.scene import Scene
+from fignet_gym.train.data_checks import truth_label
 from fignet_gym.train.evaluation import evaluate, rollout_metrics
 from fignet_gym.train.floor import perturbation_floor
 from fignet_gym.train.metrics import rotation_gain
@@ -227,3 +229,37 @@ def test_free_flight_metric_on_real_tracked_tosses(tmp_path) -> None:
     still = rollout_metrics(zero_simulator("toss", dt=trajs[0].dt), trajs, horizon=50)
     assert math.isnan(still["one_step_free_flight"])
     assert "no gravity prior" in still["one_step_free_flight_absent"]
+
+
+def test_evaluate_against_a_fitted_mujoco_file(pushes: list, tmp_path, capsys) -> None:
+    """MuJoCo is the oracle: a parameters file that keeps the generator's MJCF and substeps
+    replays generated pushes almost exactly, so its errors are a small fraction of no motion's."""
+    data = tmp_path / "pushes.h5"
+    write_trajectories(data, pushes)
+    fit = tmp_path / "fit.json"
+    fit.write_text(json.dumps({"substeps": pushes[0].metadata["substeps"], "source": "generator"}))
+    zero = tmp_path / "zero.pt"
+    zero_simulator("push").save(zero)
+    res = evaluate(str(zero), str(data), str(tmp_path / "a"), horizon=30, videos=0, against=str(fit))
+    ag = res["against"]
+    assert ag["mujoco"] == str(fit) and ag["params"]["substeps"] == pushes[0].metadata["substeps"]
+    assert ag["translation_rmse_final"] < 0.05 * res["still_translation_rmse_final"]
+    ratio = ag["ratios"]["translation_rmse"][0]
+    assert ratio == pytest.approx(res["translation_rmse_final"] / ag["translation_rmse_final"])
+    assert "fitted MuJoCo replaying the data" in capsys.readouterr().out
+    # An unknown shipped fit is refused before anything is written.
+    out = tmp_path / "none"
+    assert main(["evaluate", "--checkpoint", str(zero), "--data", str(data), "--out", str(out),
+                 "--against", "mujoco:no-such-fit"]) == 2
+    assert "available: mujoco:cube-real" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_videos_label_recorded_data_as_recorded(pushes: list) -> None:
+    sample = Path(__file__).parent / "data" / "contactnets_sample"
+    assert truth_label(pushes[0]) == "MuJoCo (ground truth)"
+    assert truth_label(replace(pushes[0], metadata={"source": "mit_pushing/json"})) == "recorded"
+    assert truth_label(replace(pushes[0], metadata={"source": "kubric_movi"})) == "Kubric (ground truth)"
+    with TemporaryDirectory() as tmp:
+        import_contactnets(sample, Path(tmp) / "cube.h5")
+        assert {truth_label(t) for t in load_trajectories(Path(tmp) / "cube.h5")} == {"recorded"}

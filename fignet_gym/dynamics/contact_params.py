@@ -22,6 +22,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from fignet_gym.pretrained import pretrained_dir
 from fignet_gym.simulator.scene import restitution_to_dampratio
 
 CONES = ("pyramidal", "elliptic")
@@ -29,6 +30,10 @@ CONES = ("pyramidal", "elliptic")
 SUBSTEP_RTOL = 1e-6
 #: Keys of the old ``CubeToss-v0`` format that this type names otherwise.
 LEGACY_KEYS = ("timestep",)
+#: File-name suffix of a fitted MuJoCo shipped next to a model (``<name>.mujoco.json``).
+SHIPPED_SUFFIX = ".mujoco.json"
+#: Prefix that names a shipped fit where a checkpoint could also be given (``mujoco:cube-real``).
+SHIPPED_PREFIX = "mujoco:"
 
 
 @dataclass(frozen=True)
@@ -170,3 +175,25 @@ def _from_legacy(d: dict[str, Any], dt: float | None, where: str) -> dict[str, A
                   "numbers, 'timestep'); convert the file once: json.dumps(ContactParams.load(path, "
                   "dt).to_json())", FutureWarning, stacklevel=3)
     return d
+
+
+def available_fits() -> list[str]:
+    """Names of the shipped fitted MuJoCo parameters (``pretrained/<name>.mujoco.json``)."""
+    return sorted(p.name[: -len(SHIPPED_SUFFIX)] for p in pretrained_dir().glob(f"*{SHIPPED_SUFFIX}"))
+
+
+def fit_path(spec: str | os.PathLike) -> Path:
+    """The file of ``mujoco:<name>`` (a shipped fit) or of a path to a parameters JSON; a
+    ``ValueError`` lists the shipped names when there is no such fit."""
+    text = str(spec)
+    if text.startswith(SHIPPED_PREFIX):
+        name = text[len(SHIPPED_PREFIX):]
+        path = pretrained_dir() / f"{name}{SHIPPED_SUFFIX}"
+        if not path.is_file():
+            raise ValueError(f"{text}: no shipped fitted MuJoCo {name!r}; available: "
+                             f"{', '.join(SHIPPED_PREFIX + n for n in available_fits()) or 'none'}")
+        return path
+    path = Path(spec)
+    if not path.is_file():
+        raise ValueError(f"{text}: no such file of MuJoCo parameters")
+    return path

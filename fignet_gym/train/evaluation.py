@@ -18,14 +18,22 @@ import numpy as np
 import torch
 
 from fignet_gym.data.format import Trajectory, build_scene, load_trajectories
+from fignet_gym.dynamics.contact_params import SHIPPED_PREFIX, ContactParams, fit_path
 from fignet_gym.pretrained import load_checkpoint
 from fignet_gym.simulator.model import LearnedSimulator
 from fignet_gym.simulator.scene import Scene
+from fignet_gym.train.analytic import Replay, replay_all
 from fignet_gym.train.data_checks import check_data_matches, check_dt
-from fignet_gym.train.metrics import HORIZON, penetration_summary, rotation_gain, score_rollouts
+from fignet_gym.train.metrics import (
+    HORIZON,
+    penetration_summary,
+    predictor_metrics,
+    rotation_gain,
+    score_rollouts,
+)
 from fignet_gym.train.one_step import one_step_errors
 from fignet_gym.train.report import plot_curves, print_table, write_comparison_video
-from fignet_gym.train.rollouts import ROLLOUT_BATCH, length_groups, pad_poses, learned_rollouts
+from fignet_gym.train.rollouts import ROLLOUT_BATCH, learned_rollouts, length_groups, pad_poses
 from fignet_gym.train.stats import paired_ratios
 
 #: Side-by-side videos ``evaluate`` writes by default.
@@ -79,6 +87,12 @@ def rollout_metrics(sim: LearnedSimulator, trajs: list[Trajectory], scenes: list
     return out
 
 
+def is_mujoco_spec(against: str) -> bool:
+    """Whether ``--against`` names a fitted MuJoCo (``mujoco:<name>`` or a ``.json`` file) rather
+    than a checkpoint."""
+    return against.startswith(SHIPPED_PREFIX) or against.endswith(".json")
+
+
 def evaluate(checkpoint: str, data: str, out: str, num: int | None = None, horizon: int = HORIZON,
              videos: int = DEFAULT_VIDEOS, against: str | None = None) -> dict[str, Any]:
     """Evaluate a checkpoint on a trajectory file: print a table, write JSON, plots and videos.
@@ -86,8 +100,11 @@ def evaluate(checkpoint: str, data: str, out: str, num: int | None = None, horiz
     ``num``: the first ``num`` trajectories (default: all). ``horizon``: frame of the headline
     errors, counted from frame 0 of each trajectory; the last frame of each is scored too.
 
-    ``against``: a second checkpoint rolled out on the same trajectories; the ratios of the two
-    models' median errors, with bootstrap intervals, are printed and stored under ``"against"``.
+    ``against``: a second checkpoint rolled out on the same trajectories, or a fitted MuJoCo
+    replaying them from the same given poses (``mujoco:<name>``, a shipped fit such as
+    ``mujoco:cube-real``, or a path to a parameters JSON, :mod:`fignet_gym.dynamics.contact_params`);
+    the ratios of the two models' median errors, with bootstrap intervals, are printed and stored
+    under ``"against"``.
     """
     if (num is not None and num < 1) or horizon < 1 or videos < 0:
         raise ValueError(f"evaluate: num and horizon must be >= 1 and videos >= 0, got "
@@ -96,15 +113,27 @@ def evaluate(checkpoint: str, data: str, out: str, num: int | None = None, horiz
     trajs = load_trajectories(data)[:num]
     check_data_matches(sim, trajs, data)
     check_dt(trajs, sim.config.dt)
+    other, params = None, None
+    if against is not None and is_mujoco_spec(against):
+        params = ContactParams.load(fit_path(against), trajs[0].dt)
+        replays = [Replay(t) for t in trajs]  # refuses trajectories without an MJCF, up front
+    elif against is not None:
+        other = load_checkpoint(against)
+        check_data_matches(other, trajs, data)
     outdir = Path(out)
     outdir.mkdir(parents=True, exist_ok=True)
     res = rollout_metrics(sim, trajs, horizon=horizon)
     res.update(checkpoint=str(checkpoint), data=str(data))
     if against is not None:
-        other = load_checkpoint(against)
-        check_data_matches(other, trajs, data)
-        ref = rollout_metrics(other, trajs, horizon=horizon)
-        res["against"] = {"checkpoint": str(against), "ratios": paired_ratios(res, ref),
+        given = sim.config.history + 1
+        if params is not None:
+            preds = replay_all(trajs, params, given=given, replays=replays)
+            ref = predictor_metrics(trajs, preds, given, horizon)
+            who = {"mujoco": str(against), "params": params.to_json()}
+        else:
+            ref = rollout_metrics(other, trajs, horizon=horizon)
+            who = {"checkpoint": str(against)}
+        res["against"] = {**who, "ratios": paired_ratios(res, ref),
                           **{k: ref[k] for k in ("translation_rmse_final", "rotation_deg_final",
                                                  "translation_rmse_last", "rotation_deg_last")}}
     (outdir / "metrics.json").write_text(json.dumps(res, indent=2))

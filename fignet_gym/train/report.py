@@ -67,7 +67,8 @@ def print_table(res: dict[str, Any], label: str = "FIGNet") -> None:
               f"floor penetration ratio {res['penetration_ratio']:.2f}")
     if "against" in res:
         ag = res["against"]
-        print(f"against {ag['checkpoint']}: translation RMSE {ag['translation_rmse_final']:.4f} m, "
+        who = ag["checkpoint"] if "checkpoint" in ag else f"{ag['mujoco']} (fitted MuJoCo replaying the data)"
+        print(f"against {who}: translation RMSE {ag['translation_rmse_final']:.4f} m, "
               f"rotation {ag['rotation_deg_final']:.2f} deg")
         for q, name in (("translation_rmse", "translation"), ("rotation_deg", "rotation"),
                         ("translation_rmse_last", "last-frame translation"),
