@@ -10,7 +10,6 @@ import json
 from pathlib import Path
 from typing import Any
 
-
 from fignet_gym.data.format import Trajectory, load_trajectories
 from fignet_gym.data.generate import resimulate
 from fignet_gym.train.metrics import HORIZON, predictor_metrics

@@ -148,8 +148,8 @@ def run_sim2real(
     from fignet_gym.data.format import load_trajectories
     from fignet_gym.train.analytic import ContactParams
     from fignet_gym.train.evaluation import rollout_metrics
-    from fignet_gym.train.stats import paired_ratios
     from fignet_gym.train.real import run_cpu_hours
+    from fignet_gym.train.stats import paired_ratios
     from fignet_gym.train.sysid import env_parameters, fit_contact_params
 
     out = Path(out)
