@@ -16,7 +16,12 @@ from fignet_gym.dynamics import Dynamics
 from fignet_gym.dynamics.contact_params import ContactParams
 from fignet_gym.envs.base import MjDynamicsEnv, add_disc, free_camera, layout, layout_size
 from fignet_gym.envs.vector import SingleEnvVectorEnv
-from fignet_gym.mjcf import cube_scene_xml, restitution_to_dampratio
+from fignet_gym.mjcf import (
+    ROLLING_FRICTION,
+    TORSIONAL_FRICTION,
+    cube_scene_xml,
+    restitution_to_dampratio,
+)
 from fignet_gym.pretrained import pretrained_dir
 
 #: The ContactNets cube (``params_processed/experiment.json``, lengths in metres): half-width,
@@ -35,7 +40,7 @@ FLOOR_HALF_SIZE = 2.0
 #: (written by ``fignet-gym sim2real``'s fit) replaces them when present.
 NOMINAL_MUJOCO = ContactParams(
     source="nominal (experiment.json friction and restitution, MuJoCo defaults otherwise)",
-    friction=NOMINAL_FRICTION, torsional=0.005, rolling=0.0001, timeconst=0.02,
+    friction=NOMINAL_FRICTION, torsional=TORSIONAL_FRICTION, rolling=ROLLING_FRICTION, timeconst=0.02,
     dampratio=restitution_to_dampratio(NOMINAL_RESTITUTION), cone="pyramidal", impratio=1.0,
     gravity=-9.81, substeps=4,
 )

@@ -15,6 +15,13 @@ from fignet_gym.data.generator_base import GENERATED_SOURCE, GENERATOR_VERSION, 
 from fignet_gym.mjcf import MIT_OBJECTS, PushObject, push_scene_xml
 from fignet_gym.simulator.scene import Scene
 
+#: Contact points on a polygon side are drawn from this fraction of its length (corners excluded).
+SIDE_FRACTION = (0.1, 0.9)
+#: Tolerance (in units of the edge parameter) of a ray-edge intersection test.
+EDGE_TOL = 1e-9
+#: Millimetres per metre (speeds are configured in mm/s).
+MM_PER_M = 1000.0
+
 
 @dataclass(frozen=True)
 class PushConfig:
@@ -73,14 +80,14 @@ def _contact_on_outline(obj: PushObject, rng: np.random.Generator,
             a, b = outline[i] - c, outline[(i + 1) % k] - c
             m = np.array([[ray[0], a[0] - b[0]], [ray[1], a[1] - b[1]]])
             lam, mu = np.linalg.solve(m, a)
-            if lam > 0 and -1e-9 <= mu <= 1 + 1e-9:
+            if lam > 0 and -EDGE_TOL <= mu <= 1 + EDGE_TOL:
                 side, point = i, c + lam * ray
                 break
         else:  # pragma: no cover - a star-shaped outline always has a hit
             raise GenerationError(f"{obj.name}: no outline edge at angle {ang}")
         return 0, s, point, _edge_normal(outline, side)
     side = int(rng.integers(k))
-    s = float(rng.uniform(0.1, 0.9))
+    s = float(rng.uniform(*SIDE_FRACTION))
     point = outline[side] * (1 - s) + outline[(side + 1) % k] * s
     return side, s, point, _edge_normal(outline, side)
 
@@ -134,7 +141,7 @@ def generate_push(rng: np.random.Generator, cfg: PushConfig) -> Trajectory:
     obj = MIT_OBJECTS[shape]
     friction = float(rng.uniform(*cfg.friction_range))
     tip_friction = float(rng.uniform(*cfg.tip_friction_range))
-    speed = float(rng.choice(cfg.speeds_mm_s)) / 1000.0
+    speed = float(rng.choice(cfg.speeds_mm_s)) / MM_PER_M
     angle_deg = float(rng.choice(cfg.angles_deg))
     yaw0 = float(rng.uniform(-np.pi, np.pi))
     side, s, point, normal = _contact_on_outline(obj, rng)

@@ -14,6 +14,13 @@ from fignet_gym.data.push_generator import PoseHook
 from fignet_gym.mjcf import MATERIALS, SIMPLE_SHAPES, TOSS_SHAPES, TossObject, toss_scene_xml, unit_shape_mesh
 from fignet_gym.simulator.scene import MeshOptions, Scene
 
+#: Lowest point (m) of a placed object above the floor at the start.
+START_CLEARANCE = 0.01
+#: A toss whose objects come within this (m) of the floor's edge is drawn again.
+FLOOR_EDGE_MARGIN = 0.5
+#: Draws of a whole toss before :class:`GenerationError`.
+MAX_ATTEMPTS = 20
+
 
 @dataclass(frozen=True)
 class TossConfig:
@@ -98,7 +105,7 @@ def _place(objects: list[TossObject], rng: np.random.Generator, cfg: TossConfig,
                 pos = rng.uniform(low, high)
                 world = v @ _quat_to_mat(q).T + pos
                 lo, hi = world.min(0), world.max(0)
-                if lo[2] < 0.01:
+                if lo[2] < START_CLEARANCE:
                     continue
                 if any(np.all(lo < bhi) and np.all(blo < hi) for blo, bhi in boxes):
                     continue
@@ -130,7 +137,7 @@ def simulate_toss(mjcf: str, num_poses: int, substeps: int, hook: PoseHook | Non
     return poses, scene
 
 
-def generate_toss(rng: np.random.Generator, cfg: TossConfig, max_attempts: int = 20) -> Trajectory:
+def generate_toss(rng: np.random.Generator, cfg: TossConfig, max_attempts: int = MAX_ATTEMPTS) -> Trajectory:
     """One toss: 3-10 objects tossed toward the centre of the floor.
 
     A draw is redrawn (from the same random stream, so still deterministic) when the objects do not
@@ -157,7 +164,7 @@ def generate_toss(rng: np.random.Generator, cfg: TossConfig, max_attempts: int =
         dyn = scene.dynamic_mask.numpy()
         if not np.isfinite(poses).all():
             continue
-        if np.abs(poses[:, dyn, :2]).max() > cfg.floor_half_size - 0.5:
+        if np.abs(poses[:, dyn, :2]).max() > cfg.floor_half_size - FLOOR_EDGE_MARGIN:
             continue
         meta = {
             "source": GENERATED_SOURCE,

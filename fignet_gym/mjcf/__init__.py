@@ -25,7 +25,13 @@ Geometry choices (why):
   values differ.
 """
 
-from fignet_gym.mjcf.assets import CONTACT_TIMECONST, prism_mesh, yaw_quat
+from fignet_gym.mjcf.assets import (
+    CONTACT_TIMECONST,
+    ROLLING_FRICTION,
+    TORSIONAL_FRICTION,
+    prism_mesh,
+    yaw_quat,
+)
 from fignet_gym.mjcf.cube import cube_scene_xml
 from fignet_gym.mjcf.push import (
     ELLIPSE_SIDES,
@@ -51,7 +57,8 @@ from fignet_gym.simulator.scene import MeshOptions, restitution_to_dampratio
 
 __all__ = [
     "COMPLEX_SHAPES", "CONTACT_TIMECONST", "ELLIPSE_SIDES", "FLOOR_FRICTION", "FLOOR_RESTITUTION",
-    "MATERIALS", "MIT_OBJECTS", "MIT_THICKNESS", "SIMPLE_SHAPES", "TOSS_SHAPES", "MeshOptions",
+    "MATERIALS", "MIT_OBJECTS", "MIT_THICKNESS", "ROLLING_FRICTION", "SIMPLE_SHAPES", "TORSIONAL_FRICTION",
+    "TOSS_SHAPES", "MeshOptions",
     "PushObject", "TossObject", "cube_scene_xml", "ellipse_outline", "prism_mesh", "push_object",
     "push_scene_xml", "restitution_to_dampratio", "toss_scene_xml", "unit_shape_mesh", "yaw_quat",
 ]

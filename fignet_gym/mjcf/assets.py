@@ -10,6 +10,8 @@ import numpy as np
 #: Turn of consecutive outline edges (a cross product, m^2) below which an outline is still convex:
 #: collinear corners of a polygon approximating a curve.
 CONVEX_TOL = 1e-12
+#: MuJoCo's default torsional and rolling friction, written where only sliding friction is chosen.
+TORSIONAL_FRICTION, ROLLING_FRICTION = 0.005, 0.0001
 #: Offscreen render buffer (pixels per side) of every scene, enough for the viewer's videos.
 OFFSCREEN_SIZE = 640
 
@@ -73,3 +75,8 @@ GRID_TEXTURE = ('<texture name="grid" type="2d" builtin="checker" rgb1=".85 .85 
 def visual_header(offsize: int = OFFSCREEN_SIZE) -> str:
     return (f'<visual><global offwidth="{offsize}" offheight="{offsize}"/>'
             '<quality shadowsize="2048"/></visual>')
+
+
+def friction_attr(sliding: float | str) -> str:
+    """MJCF ``friction`` attribute text: ``sliding`` with MuJoCo's default torsional and rolling."""
+    return f"{sliding} {TORSIONAL_FRICTION} {ROLLING_FRICTION}"

@@ -6,7 +6,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from fignet_gym.mjcf.assets import CONTACT_TIMECONST, GRID_TEXTURE, fmt_numbers, visual_header
+from fignet_gym.mjcf.assets import CONTACT_TIMECONST, GRID_TEXTURE, fmt_numbers, friction_attr, visual_header
 from fignet_gym.simulator.scene import restitution_to_dampratio
 
 
@@ -39,7 +39,7 @@ def cube_scene_xml(
             raise ValueError("cube_scene_xml needs restitution or dampratio")
         dampratio = restitution_to_dampratio(restitution)
     solref = f"{contact_timeconst:.9g} {dampratio:.9g}"
-    fr = fmt_numbers(friction) if np.ndim(friction) else f"{friction:.9g} 0.005 0.0001"
+    fr = fmt_numbers(friction) if np.ndim(friction) else friction_attr(f"{friction:.9g}")
     fl = floor_half_size
     return f"""<mujoco model="{name}_toss">
   <compiler angle="radian"/>

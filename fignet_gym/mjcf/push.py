@@ -8,7 +8,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fignet_gym.mjcf.assets import GRID_TEXTURE, fmt_numbers, mesh_asset, prism_mesh, visual_header, yaw_quat
+from fignet_gym.mjcf.assets import (
+    GRID_TEXTURE,
+    fmt_numbers,
+    friction_attr,
+    mesh_asset,
+    prism_mesh,
+    visual_header,
+    yaw_quat,
+)
 
 #: Sides of the polygon approximating an ellipse outline (vertices on the ellipse).
 ELLIPSE_SIDES = 16
@@ -172,16 +180,16 @@ def push_scene_xml(
     <light pos="0 0 2" dir="0 0 -1" directional="true"/>
     <camera name="top" pos="0 0 0.45" xyaxes="1 0 0 0 1 0"/>
     <geom name="floor" type="plane" size="{floor_half_size} {floor_half_size} 0.05" material="grid"
-          friction="{friction} 0.005 0.0001" priority="1" solref="{solref}"/>
+          friction="{friction_attr(friction)}" priority="1" solref="{solref}"/>
     <body name="object" pos="{x} {y} {obj.thickness / 2}" quat="{fmt_numbers(yaw_quat(yaw))}">
       <freejoint name="object"/>
       <inertial pos="{fmt_numbers(com)}" mass="{obj.mass}" fullinertia="{fmt_numbers(inertia)}"/>
-      <geom name="object" type="mesh" mesh="object" friction="{friction} 0.005 0.0001"
+      <geom name="object" type="mesh" mesh="object" friction="{friction_attr(friction)}"
             solref="{solref}" rgba=".75 .35 .2 1"/>
     </body>
     <body name="tip" mocap="true" pos="{float(tip_xy[0])} {float(tip_xy[1])} {tip_z}">
       <geom name="tip" type="cylinder" size="{tip_radius} {tip_half_height}" priority="1"
-            friction="{tip_friction} 0.005 0.0001" solref="{contact_timeconst} {tip_dampratio}"
+            friction="{friction_attr(tip_friction)}" solref="{contact_timeconst} {tip_dampratio}"
             rgba=".2 .3 .8 1"/>
     </body>
   </worldbody>

@@ -13,6 +13,7 @@ from fignet_gym.mjcf.assets import (
     CONTACT_TIMECONST,
     GRID_TEXTURE,
     fmt_numbers,
+    friction_attr,
     mesh_asset,
     prism_mesh,
     visual_header,
@@ -30,6 +31,10 @@ FLOOR_FRICTION, FLOOR_RESTITUTION = 0.3, 0.5
 SIMPLE_SHAPES = ("cube", "sphere", "cylinder")
 COMPLEX_SHAPES = ("cone", "torus", "torus_knot", "gear", "capsule", "star", "hourglass")
 TOSS_SHAPES = SIMPLE_SHAPES + COMPLEX_SHAPES
+#: Default start of a scene without poses: objects in a row along x, ``ROW_SPACING`` sizes apart
+#: (a unit shape spans two sizes), their centres ``ROW_HEIGHT`` sizes plus ``ROW_CLEARANCE`` (m)
+#: above the floor (clear of it in any orientation: the half-diagonal of a unit cube is 1.73).
+ROW_SPACING, ROW_HEIGHT, ROW_CLEARANCE = 2.2, 1.8, 0.01
 
 
 @dataclass(frozen=True)
@@ -189,8 +194,8 @@ def toss_scene_xml(
     if k == 0:
         raise ValueError("toss_scene_xml needs at least one object")
     if poses is None:
-        x = np.cumsum([0.0] + [o.size * 2.2 for o in objects[:-1]])
-        poses = np.array([[xi, 0.0, o.size * 1.8 + 0.01, 1, 0, 0, 0]
+        x = np.cumsum([0.0] + [o.size * ROW_SPACING for o in objects[:-1]])
+        poses = np.array([[xi, 0.0, o.size * ROW_HEIGHT + ROW_CLEARANCE, 1, 0, 0, 0]
                           for xi, o in zip(x, objects, strict=True)])
     poses = np.asarray(poses, dtype=float)
     if poses.shape != (k, 7):
@@ -208,7 +213,7 @@ def toss_scene_xml(
             f'    <body name="obj{i}" pos="{fmt_numbers(pose[:3])}" quat="{fmt_numbers(pose[3:])}">\n'
             f'      <freejoint name="obj{i}"/>\n'
             f'      <geom name="obj{i}" type="mesh" mesh="obj{i}" density="{dens}" '
-            f'friction="{fr} 0.005 0.0001" solref="{tc} {restitution_to_dampratio(rest):.9g}" '
+            f'friction="{friction_attr(fr)}" solref="{tc} {restitution_to_dampratio(rest):.9g}" '
             f'rgba="{rgba}"/>\n    </body>')
     key = ""
     if velocities is not None:
@@ -232,7 +237,7 @@ def toss_scene_xml(
   <worldbody>
     <light pos="0 0 {4 * fl}" dir="0 0 -1" directional="true"/>
     <geom name="floor" type="plane" size="{fl} {fl} 0.5" material="grid"
-          friction="{FLOOR_FRICTION} 0.005 0.0001" solref="{tc} {floor_damp:.9g}"/>
+          friction="{friction_attr(FLOOR_FRICTION)}" solref="{tc} {floor_damp:.9g}"/>
 {chr(10).join(bodies)}
   </worldbody>
 {key}</mujoco>
