@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import json
 import math
 import os
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -13,9 +13,16 @@ import numpy as np
 from gymnasium import spaces
 
 from fignet_gym.dynamics import Dynamics
+from fignet_gym.dynamics.contact_params import ContactParams
 from fignet_gym.envs.base import MjDynamicsEnv, add_disc, free_camera, layout, layout_size
 from fignet_gym.envs.vector import SingleEnvVectorEnv
-from fignet_gym.mjcf import cube_scene_xml, restitution_to_dampratio
+from fignet_gym.mjcf import (
+    ROLLING_FRICTION,
+    TORSIONAL_FRICTION,
+    cube_scene_xml,
+    restitution_to_dampratio,
+)
+from fignet_gym.pretrained import pretrained_dir
 
 #: The ContactNets cube (``params_processed/experiment.json``, lengths in metres): half-width,
 #: mass (kg), principal inertia (kg m^2), nominal friction and restitution; the data's step (s).
@@ -31,70 +38,62 @@ FLOOR_HALF_SIZE = 2.0
 #: MuJoCo parameters: ``source`` says where they come from. The nominal ones are the data's
 #: ``experiment.json`` with MuJoCo's defaults; ``fignet_gym/pretrained/cube-real.mujoco.json``
 #: (written by ``fignet-gym sim2real``'s fit) replaces them when present.
-NOMINAL_MUJOCO: dict[str, Any] = {
-    "source": "nominal (experiment.json friction and restitution, MuJoCo defaults otherwise)",
-    "friction": [NOMINAL_FRICTION, 0.005, 0.0001], "timeconst": 0.02,
-    "dampratio": restitution_to_dampratio(NOMINAL_RESTITUTION), "cone": "pyramidal",
-    "impratio": 1.0, "gravity": -9.81, "timestep": DATA_DT / 4,
-}
-MUJOCO_KEYS = set(NOMINAL_MUJOCO)
+NOMINAL_MUJOCO = ContactParams(
+    source="nominal (experiment.json friction and restitution, MuJoCo defaults otherwise)",
+    friction=NOMINAL_FRICTION, torsional=TORSIONAL_FRICTION, rolling=ROLLING_FRICTION, timeconst=0.02,
+    dampratio=restitution_to_dampratio(NOMINAL_RESTITUTION), cone="pyramidal", impratio=1.0,
+    gravity=-9.81, substeps=4,
+)
+#: Fields of :class:`ContactParams` the cube scene has no use for (no pusher, MJCF defaults).
+UNUSED_FIELDS = ("friction_kinematic", "noslip_iterations", "integrator")
 
 
 def fitted_mujoco_path() -> Path:
     """Where the fitted MuJoCo parameters of the cube are shipped (next to ``cube-real.pt``)."""
-    from fignet_gym.pretrained import pretrained_dir
-
     return pretrained_dir() / "cube-real.mujoco.json"
 
 
-def mujoco_parameters(spec: str | os.PathLike | dict[str, Any] | None = None) -> dict[str, Any]:
+def mujoco_parameters(spec: str | os.PathLike | dict[str, Any] | ContactParams | None = None
+                      ) -> ContactParams:
     """MuJoCo parameters of the cube scene: ``"nominal"``, ``"fitted"`` (the shipped fit; the
-    nominal ones, with a warning in ``source``, if none is shipped), a JSON file or a dict.
+    nominal ones, with a warning in ``source``, if none is shipped), a JSON file, a dict or a
+    :class:`ContactParams`; unset fields are the nominal ones.
 
-    Keys (all optional, missing ones nominal): ``friction`` (one number or the three of MuJoCo's
-    ``friction``), ``timeconst`` (s) and ``dampratio`` (``solref``), ``cone`` (``"pyramidal"`` or
-    ``"elliptic"``), ``impratio``, ``gravity`` (m/s^2 along z), ``timestep`` (s, a divisor of
-    the data's step), ``source`` (text). Unknown keys raise ``ValueError``.
+    Fields (:class:`ContactParams`): ``friction``, ``torsional``, ``rolling``, ``timeconst`` (s)
+    and ``dampratio`` (``solref``), ``cone``, ``impratio``, ``gravity`` (m/s^2 along z),
+    ``substeps`` (MuJoCo steps per data step), ``source`` (text). Unknown keys raise
+    ``ValueError``; the old format of this env (``friction`` as three numbers, ``timestep``)
+    loads with a ``FutureWarning``.
     """
     if spec is None or spec == "fitted":
         path = fitted_mujoco_path()
         if not path.is_file():
-            return {**NOMINAL_MUJOCO, "source": "NOMINAL: no fitted parameters shipped "
-                    f"({path.name} missing); " + NOMINAL_MUJOCO["source"]}
+            return replace(NOMINAL_MUJOCO, source="NOMINAL: no fitted parameters shipped "
+                           f"({path.name} missing); {NOMINAL_MUJOCO.source}")
         spec = path
     if spec == "nominal":
-        return dict(NOMINAL_MUJOCO)
-    if isinstance(spec, (str, os.PathLike)):
-        try:
-            raw = json.loads(Path(spec).read_text())
-        except (OSError, json.JSONDecodeError) as err:
-            raise ValueError(f"{spec}: not a readable JSON file of MuJoCo parameters ({err})") from None
-        where = str(spec)
+        return NOMINAL_MUJOCO
+    if isinstance(spec, ContactParams):
+        params, where = spec, "mujoco parameters"
+    elif isinstance(spec, (str, os.PathLike)):
+        params, where = ContactParams.load(spec, DATA_DT), str(spec)
     else:
-        raw, where = dict(spec), "mujoco parameters"
-    unknown = set(raw) - MUJOCO_KEYS
-    if unknown:
-        raise ValueError(f"{where}: unknown keys {sorted(unknown)} (known: {sorted(MUJOCO_KEYS)})")
-    out = {**NOMINAL_MUJOCO, "source": where, **raw}
-    fr = out["friction"]
-    out["friction"] = [float(fr), 0.005, 0.0001] if np.ndim(fr) == 0 else [float(x) for x in fr]
-    if len(out["friction"]) != 3 or out["cone"] not in ("pyramidal", "elliptic"):
-        raise ValueError(f"{where}: friction needs 1 or 3 numbers and cone 'pyramidal' or 'elliptic'")
-    ratio = DATA_DT / float(out["timestep"])
-    if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
-        raise ValueError(f"{where}: timestep {out['timestep']} s does not divide the data's step {DATA_DT} s")
-    return out
+        where = "mujoco parameters"
+        params = ContactParams.from_json(spec, DATA_DT, where)
+    unused = [k for k in UNUSED_FIELDS if getattr(params, k) is not None]
+    if unused:
+        raise ValueError(f"{where}: the cube scene does not use {unused}")
+    return replace(params.filled(NOMINAL_MUJOCO), source=params.source or where)
 
 
-def cube_toss_xml(params: dict[str, Any]) -> str:
+def cube_toss_xml(params: ContactParams) -> str:
     """MJCF of the cube (free joint, box ``cube``) over the floor plane (the world body) with
-    MuJoCo parameters ``params`` (as :func:`mujoco_parameters` returns them)."""
+    MuJoCo parameters ``params`` (complete, as :func:`mujoco_parameters` returns them)."""
     return cube_scene_xml(
-        CUBE_HALF_WIDTH, CUBE_MASS, CUBE_INERTIA, params["friction"], None,
-        timestep=float(params["timestep"]), gravity=float(params["gravity"]),
-        floor_half_size=FLOOR_HALF_SIZE, contact_timeconst=float(params["timeconst"]),
-        dampratio=float(params["dampratio"]), cone=params["cone"],
-        impratio=float(params["impratio"]))
+        CUBE_HALF_WIDTH, CUBE_MASS, CUBE_INERTIA, [params.friction, params.torsional, params.rolling],
+        None, timestep=DATA_DT / params.substeps, gravity=params.gravity,
+        floor_half_size=FLOOR_HALF_SIZE, contact_timeconst=params.timeconst,
+        dampratio=params.dampratio, cone=params.cone, impratio=params.impratio)
 
 
 def resting_yaw(quat: np.ndarray) -> float:
@@ -325,7 +324,7 @@ class CubeTossEnv(MjDynamicsEnv):
         info = {"distance": dist, "yaw_error_deg": math.degrees(psi), "success": success,
                 "is_success": success,  # the key run_episode and SB3's evaluate_policy read
                 "speed": float(np.linalg.norm(self.data.qvel[:3])),
-                "mujoco_source": self.mujoco_params["source"]}
+                "mujoco_source": self.mujoco_params.source}
         return terms, True, False, info
 
     def _camera(self) -> mujoco.MjvCamera:

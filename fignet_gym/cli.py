@@ -79,7 +79,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _floor(args: argparse.Namespace) -> int:
-    from fignet_gym.train.evaluation import floor_table
+    from fignet_gym.train.floor import floor_table
 
     floor_table(args.data, args.noise, out=args.out, num=args.num, horizon=args.horizon,
                 history=args.history)
@@ -196,8 +196,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="frame of the headline errors, counted from frame 0 of each trajectory "
                    "(each trajectory's last frame is scored too)")
     e.add_argument("--videos", type=int_at_least(0), default=2, help="side-by-side videos to write")
-    e.add_argument("--against", help="second checkpoint (e.g. a baseline) on the same trajectories: "
-                   "ratio of median errors with a bootstrap interval")
+    e.add_argument("--against", help="second checkpoint (e.g. a baseline), or a fitted MuJoCo "
+                   "(mujoco:cube-real, or a parameters .json), on the same trajectories: ratio of "
+                   "median errors with a bootstrap interval")
     e.set_defaults(func=_evaluate)
 
     f = sub.add_parser("floor", help="MuJoCo's own rollout error from a slightly wrong start "

@@ -92,7 +92,7 @@ def test_learned_model_gets_the_training_scene_and_mujoco_the_fit(tmp_path) -> N
     nominal = Scene.from_mjmodel(mujoco.MjModel.from_xml_string(cube_toss_xml(mujoco_parameters("nominal"))))
     np.testing.assert_allclose(Scene.from_mjmodel(learned.model).object_props, nominal.object_props)
     assert learned.model.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL
-    with pytest.raises(ValueError, match="unknown keys"):
+    with pytest.raises(ValueError, match="unknown contact parameters"):
         mujoco_parameters({"frcition": 0.2})
 
 
@@ -153,7 +153,7 @@ def test_fitted_mujoco_and_cube_real_land_the_cube_close_together() -> None:
     landed = {}
     for dyn in ("mujoco", "fignet"):
         venv = gym.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", dynamics=dyn)
-        assert "NOMINAL" not in venv.unwrapped.envs[0].mujoco_params["source"] or dyn == "fignet"
+        assert "NOMINAL" not in venv.unwrapped.envs[0].mujoco_params.source or dyn == "fignet"
         venv.reset(seed=0)
         obs, *_ = venv.step(np.random.default_rng(1).uniform(-1, 1, (n, 6)))
         landed[dyn] = obs[:, 1:3]

@@ -13,7 +13,7 @@ import pytest
 from fignet_gym.data import generate as gen
 from fignet_gym.data.cli import register
 from fignet_gym.data.format import INCOMPLETE_SUFFIX, TrajectoryFile, load_trajectories
-from fignet_gym.mjcf import MATERIALS, MIT_OBJECTS
+from fignet_gym.mjcf import MATERIALS, MIT_OBJECTS, TOSS_SHAPES
 from fignet_gym.simulator.scene import ObjectKind
 
 SHORT_TOSS = replace(gen.TossConfig(), duration=0.3)
@@ -118,7 +118,7 @@ def test_toss_poses_match_mujoco_from_keyframe() -> None:
         mujoco.mj_step(model, data, nstep=10)
         qpos = data.qpos.reshape(-1, 7)
         np.testing.assert_allclose(traj.poses[k, 1:], qpos, atol=1e-9)
-    assert set(traj.metadata["shapes"]) <= set(gen.TOSS_SHAPES)
+    assert set(traj.metadata["shapes"]) <= set(TOSS_SHAPES)
     assert all(0.7 <= s <= 1.4 for s in traj.metadata["sizes"])
 
 

@@ -3,24 +3,29 @@
 import json
 import math
 from dataclasses import replace
+from pathlib import Path
+from tempfile import TemporaryDirectory
 
 import numpy as np
 import pytest
 import torch
 
 from fignet_gym.cli import main
-from fignet_gym.data.format import TrajectoryWriter, build_scene
+from fignet_gym.data.format import TrajectoryWriter, build_scene, load_trajectories, write_trajectories
 from fignet_gym.data.generate import TossConfig, iter_trajectories
+from fignet_gym.data.tracked import import_contactnets
 from fignet_gym.simulator.checkpoint import save
+from fignet_gym.simulator.config import SimulatorConfig
 from fignet_gym.simulator.geometry import quat_mul
+from fignet_gym.simulator.model import LearnedSimulator
 from fignet_gym.simulator.scene import Scene
-from fignet_gym.train.evaluation import (
-    median_ratio_interval,
-    one_step_errors,
-    perturbation_floor,
-    rollout_metrics,
-)
-from tests.sim_factories import zero_simulator
+from fignet_gym.train.data_checks import truth_label
+from fignet_gym.train.evaluation import evaluate, rollout_metrics
+from fignet_gym.train.floor import perturbation_floor
+from fignet_gym.train.metrics import rotation_gain
+from fignet_gym.train.one_step import one_step_errors, spin_change
+from fignet_gym.train.stats import median_ratio_interval, paired_ratios
+from tests.sim_factories import SMALL, quiet_simulator, zero_simulator
 
 
 @pytest.fixture(scope="module")
@@ -66,8 +71,6 @@ def test_median_ratio_interval_brackets_known_ratios() -> None:
 
 
 def test_rotation_gain_hand_cases() -> None:
-    from fignet_gym.train.evaluation import rotation_gain
-
     def about(axis: int, deg: float) -> torch.Tensor:  # pose at the origin, turned about an axis
         q = torch.zeros(7)
         q[3] = math.cos(math.radians(deg) / 2)
@@ -85,8 +88,6 @@ def test_rotation_gain_hand_cases() -> None:
 
 
 def test_spin_change_hand_case() -> None:
-    from fignet_gym.train.evaluation import spin_change
-
     def about_z(rad: float) -> torch.Tensor:
         return torch.tensor([[math.cos(rad / 2), 0.0, 0.0, math.sin(rad / 2)]], dtype=torch.float64)
 
@@ -103,8 +104,6 @@ def test_free_flight_error_hand_case() -> None:
     # Tosses start in the air. A zero network with the gravity prior predicts exactly g dt^2 for
     # every node, so its free-flight error is 0; shifting its output by half of g dt^2 (through
     # the target normaliser's mean) makes it exactly 0.5.
-    from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
-    from tests.sim_factories import SMALL
 
     trajs = list(iter_trajectories("toss-simple", 2, seed=3))
     sim = LearnedSimulator(SimulatorConfig(**SMALL, gravity=(0.0, 0.0, -10.0), scene_type="toss")).eval()
@@ -122,10 +121,6 @@ def test_free_flight_error_hand_case() -> None:
 
 
 def test_evaluate_against_a_second_checkpoint_pairs_the_trajectories(pushes: list, tmp_path) -> None:
-    from fignet_gym.data.format import write_trajectories
-    from fignet_gym.train.evaluation import evaluate, paired_ratios
-    from tests.sim_factories import quiet_simulator
-
     data = tmp_path / "pushes.h5"
     write_trajectories(data, pushes)
     zero, quiet = tmp_path / "zero.pt", tmp_path / "quiet.pt"
@@ -205,8 +200,6 @@ def test_every_trajectory_is_scored_over_its_own_length_from_frame_0(pushes: lis
 
 
 def test_data_dt_must_be_the_models(pushes: list, tmp_path) -> None:
-    from fignet_gym.data.format import write_trajectories
-
     with pytest.raises(ValueError, match=r"trajectory .*field 'dt' is 0.02 s, the model steps 0.01 s"):
         rollout_metrics(zero_simulator("push", dt=0.01), pushes, horizon=10)
     data, ckpt = tmp_path / "p.h5", tmp_path / "m.pt"
@@ -219,13 +212,6 @@ def test_data_dt_must_be_the_models(pushes: list, tmp_path) -> None:
 def test_free_flight_metric_on_real_tracked_tosses(tmp_path) -> None:
     """On the real tosses the old test (second differences within 2% of g) never held; free flight
     is now found by geometry, and the data's own acceleration (~9.6 m/s^2 down) is measured."""
-    from pathlib import Path
-
-    from fignet_gym.data.format import load_trajectories
-    from fignet_gym.data.tracked import import_contactnets
-    from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
-    from tests.sim_factories import SMALL
-
     data = tmp_path / "cube.h5"
     import_contactnets(Path(__file__).parent / "data" / "contactnets_sample", data)
     trajs = load_trajectories(data)
@@ -245,3 +231,37 @@ def test_free_flight_metric_on_real_tracked_tosses(tmp_path) -> None:
     still = rollout_metrics(zero_simulator("toss", dt=trajs[0].dt), trajs, horizon=50)
     assert math.isnan(still["one_step_free_flight"])
     assert "no gravity prior" in still["one_step_free_flight_absent"]
+
+
+def test_evaluate_against_a_fitted_mujoco_file(pushes: list, tmp_path, capsys) -> None:
+    """MuJoCo is the oracle: a parameters file that keeps the generator's MJCF and substeps
+    replays generated pushes almost exactly, so its errors are a small fraction of no motion's."""
+    data = tmp_path / "pushes.h5"
+    write_trajectories(data, pushes)
+    fit = tmp_path / "fit.json"
+    fit.write_text(json.dumps({"substeps": pushes[0].metadata["substeps"], "source": "generator"}))
+    zero = tmp_path / "zero.pt"
+    save(zero_simulator("push"), zero)
+    res = evaluate(str(zero), str(data), str(tmp_path / "a"), horizon=30, videos=0, against=str(fit))
+    ag = res["against"]
+    assert ag["mujoco"] == str(fit) and ag["params"]["substeps"] == pushes[0].metadata["substeps"]
+    assert ag["translation_rmse_final"] < 0.05 * res["still_translation_rmse_final"]
+    ratio = ag["ratios"]["translation_rmse"][0]
+    assert ratio == pytest.approx(res["translation_rmse_final"] / ag["translation_rmse_final"])
+    assert "fitted MuJoCo replaying the data" in capsys.readouterr().out
+    # An unknown shipped fit is refused before anything is written.
+    out = tmp_path / "none"
+    assert main(["evaluate", "--checkpoint", str(zero), "--data", str(data), "--out", str(out),
+                 "--against", "mujoco:no-such-fit"]) == 2
+    assert "available: mujoco:cube-real" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_videos_label_recorded_data_as_recorded(pushes: list) -> None:
+    sample = Path(__file__).parent / "data" / "contactnets_sample"
+    assert truth_label(pushes[0]) == "MuJoCo (ground truth)"
+    assert truth_label(replace(pushes[0], metadata={"source": "mit_pushing/json"})) == "recorded"
+    assert truth_label(replace(pushes[0], metadata={"source": "kubric_movi"})) == "Kubric (ground truth)"
+    with TemporaryDirectory() as tmp:
+        import_contactnets(sample, Path(tmp) / "cube.h5")
+        assert {truth_label(t) for t in load_trajectories(Path(tmp) / "cube.h5")} == {"recorded"}

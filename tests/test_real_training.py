@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import mujoco
@@ -34,7 +35,7 @@ TINY = {"simulator.latent_size": 8, "simulator.message_passing_steps": 1,
 
 def cube_tosses(n: int, gravity: float, poses: int = 40, seed: int = 0) -> list[Trajectory]:
     """MuJoCo tosses of the ContactNets cube (nominal contact) under ``gravity`` (m/s^2)."""
-    params = {**mujoco_parameters("nominal"), "gravity": gravity}
+    params = replace(mujoco_parameters("nominal"), gravity=gravity)
     xml = cube_toss_xml(params)
     model = mujoco.MjModel.from_xml_string(xml)
     scene = Scene.from_mjmodel(model)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import mujoco
@@ -14,9 +15,10 @@ from fignet_gym.cli import main
 from fignet_gym.data.format import load_trajectories
 from fignet_gym.data.generate import iter_trajectories
 from fignet_gym.data.tracked import import_contactnets, tracked_trajectory
+from fignet_gym.dynamics.contact_params import ContactParams
 from fignet_gym.dynamics.mujoco import MujocoDynamics
 from fignet_gym.mjcf import cube_scene_xml
-from fignet_gym.train.analytic import ContactParams, Replay, finite_difference_state
+from fignet_gym.train.analytic import Replay, finite_difference_state
 from fignet_gym.train.sysid import DEFAULT_SPACE, Dimension, ReplaySet, fit_contact_params, replay_loss
 
 SAMPLE = Path(__file__).parent / "data" / "contactnets_sample"
@@ -137,9 +139,8 @@ def test_sim2real_mujoco_stages_on_the_real_sample(tmp_path: Path, capsys) -> No
     assert res["no_motion"]["translation_rmse_final_ratio_still"] == 1.0
     assert "MuJoCo, fitted" in (out / "table.md").read_text()
     assert (out / "errors_vs_size.png").stat().st_size > 0
-    env = json.loads((out / "mujoco_fitted_env.json").read_text())
-    dt = load_trajectories(data)[0].dt
-    assert env["timestep"] == pytest.approx(dt / res["fit"]["params"]["substeps"])
+    env = ContactParams.load(out / "mujoco_fitted_env.json")  # the shipped format: no conversion
+    assert env == replace(ContactParams.from_json(res["fit"]["params"]), source=env.source)
     # a second run without --resume refuses to overwrite; with it, nothing is redone
     assert main(argv) == 2
     assert "--resume" in capsys.readouterr().err

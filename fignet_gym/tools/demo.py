@@ -26,12 +26,8 @@ DEMO_SEED = 987_654  # far from the seeds of the shipped training and validation
 def _task(name: str, kind: str, num: int, out: Path, videos: int, horizon: int) -> dict[str, Any]:
     from fignet_gym.data.generate import iter_trajectories
     from fignet_gym.pretrained import load_pretrained
-    from fignet_gym.train.evaluation import (
-        plot_curves,
-        print_table,
-        rollout_metrics,
-        write_comparison_video,
-    )
+    from fignet_gym.train.evaluation import rollout_metrics
+    from fignet_gym.train.report import plot_curves, print_table, write_comparison_video
 
     sim = load_pretrained(name)
     print(f"\n=== {name}: {num} fresh MuJoCo '{kind}' trajectories (seed {DEMO_SEED}) ===")

@@ -3,8 +3,9 @@
 A trajectory with an MJCF is re-simulated from its recorded start: dynamic objects start at a
 recorded pose with velocities from finite differences of the first poses (the same poses a learned
 rollout is given), kinematic objects (the MIT pusher) follow their recorded poses, static ones
-stay. :class:`ContactParams` overrides MuJoCo's contact parameters (the family system
-identification searches), so nominal and fitted MuJoCo are the same code.
+stay. :class:`~fignet_gym.dynamics.contact_params.ContactParams` overrides MuJoCo's contact
+parameters (the family system identification searches), so nominal and fitted MuJoCo are the
+same code.
 
 Velocities from ``n`` given poses (``history + 1``; frame indices from 0): with ``n >= 3`` the
 simulation starts at frame ``n - 2`` with central differences over frames ``n - 3`` and ``n - 1``
@@ -14,114 +15,29 @@ the backward difference. Frames up to the start are the recorded ones.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, replace
-from typing import Any
 
 import mujoco
 import numpy as np
 
 from fignet_gym.data.format import Trajectory
 from fignet_gym.dynamics.base import STATE_SPEC, Dynamics
-from fignet_gym.simulator.scene import ObjectKind, Scene, restitution_to_dampratio
+from fignet_gym.dynamics.contact_params import ContactParams
+from fignet_gym.dynamics.mujoco import MujocoDynamics
+from fignet_gym.simulator.scene import ObjectKind, Scene
 
-CONES = ("pyramidal", "elliptic")
-
-
-@dataclass(frozen=True)
-class ContactParams:
-    """MuJoCo settings applied to a trajectory's MJCF (``None``: keep the MJCF's).
-
-    Attributes:
-        friction: sliding friction of every geom of static and dynamic bodies.
-        friction_kinematic: sliding friction of kinematic (mocap) bodies' geoms (a pusher).
-        torsional, rolling: the other two friction coefficients of every geom.
-        timeconst: ``solref[0]`` (s) of every geom. dampratio: ``solref[1]`` of every geom.
-        cone: ``"pyramidal"`` or ``"elliptic"``. impratio: MuJoCo's ``impratio``.
-        noslip_iterations: MuJoCo's ``noslip_iterations``.
-        gravity: z component (m/s^2).
-        substeps: MuJoCo timesteps per data step (timestep = ``dt / substeps``; ``None``: the
-            MJCF's timestep, rounded so that it divides ``dt``).
-        integrator: ``"Euler"``, ``"implicitfast"``, ``"RK4"`` ... (``mjtIntegrator`` names).
-    """
-
-    friction: float | None = None
-    friction_kinematic: float | None = None
-    torsional: float | None = None
-    rolling: float | None = None
-    timeconst: float | None = None
-    dampratio: float | None = None
-    cone: str | None = None
-    impratio: float | None = None
-    noslip_iterations: int | None = None
-    gravity: float | None = None
-    substeps: int | None = None
-    integrator: str | None = None
-
-    def __post_init__(self) -> None:
-        if self.cone is not None and self.cone not in CONES:
-            raise ValueError(f"cone must be one of {CONES}, got {self.cone!r}")
-        if self.substeps is not None and int(self.substeps) < 1:
-            raise ValueError(f"substeps must be >= 1, got {self.substeps}")
-
-    def to_json(self) -> dict[str, Any]:
-        """The non-default fields (JSON-serialisable)."""
-        return {k: v for k, v in asdict(self).items() if v is not None}
-
-    @staticmethod
-    def from_json(d: dict[str, Any]) -> ContactParams:
-        """Inverse of :meth:`to_json`; unknown keys are an error."""
-        known = set(ContactParams.__dataclass_fields__)
-        bad = set(d) - known
-        if bad:
-            raise ValueError(f"unknown contact parameters {sorted(bad)}; known: {sorted(known)}")
-        return ContactParams(**d)
-
-    def with_restitution(self, restitution: float) -> ContactParams:
-        """The same with ``dampratio`` from a coefficient of restitution."""
-        return replace(self, dampratio=restitution_to_dampratio(restitution))
-
-    def apply(self, model: mujoco.MjModel, dt: float) -> mujoco.MjModel:
-        """Set these parameters on ``model`` in place (timestep ``dt / substeps``); returns it."""
-        kin = np.array([model.body_mocapid[b] >= 0 for b in model.geom_bodyid])
-        if self.friction is not None:
-            model.geom_friction[~kin, 0] = self.friction
-        if self.friction_kinematic is not None:
-            model.geom_friction[kin, 0] = self.friction_kinematic
-        if self.torsional is not None:
-            model.geom_friction[:, 1] = self.torsional
-        if self.rolling is not None:
-            model.geom_friction[:, 2] = self.rolling
-        if self.timeconst is not None:
-            model.geom_solref[:, 0] = self.timeconst
-        if self.dampratio is not None:
-            model.geom_solref[:, 1] = self.dampratio
-        if self.cone is not None:
-            model.opt.cone = (mujoco.mjtCone.mjCONE_ELLIPTIC if self.cone == "elliptic"
-                              else mujoco.mjtCone.mjCONE_PYRAMIDAL)
-        if self.impratio is not None:
-            model.opt.impratio = self.impratio
-        if self.noslip_iterations is not None:
-            model.opt.noslip_iterations = int(self.noslip_iterations)
-        if self.gravity is not None:
-            model.opt.gravity[:] = (0.0, 0.0, self.gravity)
-        if self.integrator is not None:
-            model.opt.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{self.integrator.upper()}")
-        model.opt.timestep = dt / self.substeps_for(model, dt)
-        return model
-
-    def substeps_for(self, model: mujoco.MjModel, dt: float) -> int:
-        """``substeps``, or the MJCF's own: ``round(dt / timestep)`` (at least 1)."""
-        if self.substeps is not None:
-            return int(self.substeps)
-        return max(1, int(round(dt / model.opt.timestep)))
+#: Poses a replay is given by default (a learned model's ``history + 1``).
+GIVEN_POSES = 3
+#: Below this norm of a quaternion's vector part the rotation is the small-angle limit.
+SMALL_ANGLE = 1e-12
 
 
 def _axis_angle(q: np.ndarray) -> np.ndarray:
     """Rotation vector ``float[3]`` of a unit quaternion ``float[4]`` (w x y z), angle in [0, pi]."""
     q = q if q[0] >= 0 else -q
     s = np.linalg.norm(q[1:])
-    if s < 1e-12:
+    if s < SMALL_ANGLE:
         return 2.0 * q[1:]
     return 2.0 * np.arctan2(s, q[0]) * q[1:] / s
 
@@ -198,7 +114,7 @@ class Replay:
             self._params = params
         return self._model
 
-    def rollout(self, params: ContactParams, dynamics: Dynamics, given: int = 3,
+    def rollout(self, params: ContactParams, dynamics: Dynamics, given: int = GIVEN_POSES,
                 steps: int | None = None) -> np.ndarray:
         """Poses ``float[T', O, 7]`` (``T' = min(T, steps)``): recorded up to the start frame,
         simulated after it by ``dynamics.rollout`` (one state per data step of ``substeps``
@@ -251,17 +167,13 @@ class Replay:
 
 
 def _copy_model(model: mujoco.MjModel) -> mujoco.MjModel:
-    import copy
-
     return copy.copy(model)
 
 
 def replay_all(trajs: Sequence[Trajectory], params: ContactParams, dynamics: Dynamics | None = None,
-               given: int = 3, steps: int | None = None,
+               given: int = GIVEN_POSES, steps: int | None = None,
                replays: Sequence[Replay] | None = None) -> list[np.ndarray]:
     """:meth:`Replay.rollout` of every trajectory (``MujocoDynamics`` by default)."""
-    from fignet_gym.dynamics.mujoco import MujocoDynamics
-
     dynamics = dynamics or MujocoDynamics(nthread=1)
     replays = replays or [Replay(t) for t in trajs]
     return [r.rollout(params, dynamics, given, steps) for r in replays]

@@ -17,7 +17,8 @@ from fignet_gym.pretrained import pretrained_dir
 from fignet_gym.simulator.checkpoint import load, save
 from fignet_gym.simulator.config import SimulatorConfig
 from fignet_gym.simulator.model import LearnedSimulator
-from fignet_gym.train.evaluation import check_data_matches, rollout_metrics
+from fignet_gym.train.data_checks import check_data_matches
+from fignet_gym.train.evaluation import rollout_metrics
 from fignet_gym.train.sampling import median_node_acceleration
 
 

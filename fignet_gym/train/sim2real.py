@@ -117,7 +117,7 @@ def parse_sizes(values: Sequence[str]) -> list[int | None]:
 
 
 def _mujoco_metrics(trajs: list, params: Any, given: int, horizon: int) -> dict[str, Any]:
-    from fignet_gym.train.evaluation import predictor_metrics
+    from fignet_gym.train.metrics import predictor_metrics
     from fignet_gym.train.sysid import ReplaySet
 
     rs = ReplaySet(trajs, given, horizon)
@@ -147,8 +147,9 @@ def run_sim2real(
     """
     from fignet_gym.data.format import load_trajectories
     from fignet_gym.train.analytic import ContactParams
-    from fignet_gym.train.evaluation import paired_ratios, rollout_metrics
+    from fignet_gym.train.evaluation import rollout_metrics
     from fignet_gym.train.real import run_cpu_hours
+    from fignet_gym.train.stats import paired_ratios
     from fignet_gym.train.sysid import env_parameters, fit_contact_params
 
     out = Path(out)

@@ -21,11 +21,17 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import cma
+import mujoco
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from fignet_gym.data.format import Trajectory
-from fignet_gym.train.analytic import CONES, ContactParams, Replay
+from fignet_gym.dynamics.contact_params import CONES, ContactParams
+from fignet_gym.dynamics.mujoco import MujocoDynamics
+from fignet_gym.simulator.geometry import transform_points
+from fignet_gym.train.analytic import GIVEN_POSES, Replay
 
 #: Loss scales: 1 cm of translation RMSE weighs as much as 10 degrees of rotation error.
 TRANSLATION_SCALE, ROTATION_SCALE = 0.01, 10.0
@@ -35,6 +41,19 @@ CLIP = 10.0
 #: Candidate substeps (MuJoCo timesteps per data step) as multiples of the MJCF's own, chosen on
 #: validation.
 SUBSTEP_FACTORS = (0.5, 1.0, 2.0)
+#: A start of the search is kept this far (in unit coordinates) inside the bounds, so that CMA-ES
+#: can step both ways.
+UNIT_MARGIN = 0.02
+#: CMA-ES initial step size, in unit coordinates.
+CMA_SIGMA0 = 0.25
+#: Start of a pusher's friction when the MJCF has no kinematic geom to read it from.
+KINEMATIC_FRICTION_START = 0.2
+#: Frames of each trajectory the loss averages over, and the weight of its last frame.
+FIT_FRAMES, LAST_FRAME_WEIGHT = 100, 0.5
+#: MuJoCo needs a contact time constant of at least this many timesteps to stay stable.
+MIN_TIMECONST_STEPS = 2
+#: Default frame (from 0) of the reported errors.
+HORIZON = 50
 
 
 @dataclass(frozen=True)
@@ -57,7 +76,7 @@ class Dimension:
             u = (math.log(v) - math.log(self.low)) / (math.log(self.high) - math.log(self.low))
         else:
             u = (v - self.low) / (self.high - self.low)
-        return float(np.clip(u, 0.02, 0.98))
+        return float(np.clip(u, UNIT_MARGIN, 1.0 - UNIT_MARGIN))
 
 
 #: The searched family (bounds wide around the nominal values; the time constant stays above
@@ -89,9 +108,8 @@ class ReplaySet:
         horizon: frame (from 0) of the reported errors (``errors_at``).
     """
 
-    def __init__(self, trajs: Sequence[Trajectory], given: int = 3, horizon: int = 50) -> None:
-        from fignet_gym.dynamics.mujoco import MujocoDynamics
-
+    def __init__(self, trajs: Sequence[Trajectory], given: int = GIVEN_POSES, horizon: int = HORIZON
+                 ) -> None:
         self.trajs = list(trajs)
         self.given, self.horizon = given, horizon
         self.replays = [Replay(t) for t in self.trajs]
@@ -120,13 +138,11 @@ class ReplaySet:
 
 def _com(poses: np.ndarray, com: np.ndarray) -> np.ndarray:
     """World centre-of-mass positions ``float[T, O, 3]`` of body poses ``float[T, O, 7]``."""
-    from fignet_gym.simulator.geometry import transform_points
-
     return transform_points(torch.as_tensor(poses), torch.as_tensor(com)).numpy()
 
 
-def replay_loss(errs: list[tuple[np.ndarray, np.ndarray]], given: int, fit_frames: int = 100,
-                last_weight: float = 0.5) -> float:
+def replay_loss(errs: list[tuple[np.ndarray, np.ndarray]], given: int, fit_frames: int = FIT_FRAMES,
+                last_weight: float = LAST_FRAME_WEIGHT) -> float:
     """Fit loss: mean over trajectories of the mean over frames ``given .. fit_frames - 1`` of
     ``min(e / 1 cm, 10) + min(r / 10 deg, 10)``, plus ``last_weight`` times the same at each
     trajectory's last frame."""
@@ -160,7 +176,7 @@ def fit_contact_params(
     train: Sequence[Trajectory], valid: Sequence[Trajectory], out: str | os.PathLike | None = None,
     *, base: ContactParams | None = None, space: Sequence[Dimension] | None = None,
     cones: Sequence[str] = CONES, evaluations: int = 240, fit_trajectories: int = 64,
-    given: int = 3, horizon: int = 50, seed: int = 0, substeps: Sequence[int] | None = None,
+    given: int = GIVEN_POSES, horizon: int = HORIZON, seed: int = 0, substeps: Sequence[int] | None = None,
     progress: bool = True,
 ) -> dict[str, Any]:
     """Fit :class:`ContactParams` to ``train`` by CMA-ES, one run per friction cone; select on
@@ -180,9 +196,6 @@ def fit_contact_params(
 
     Returns ``{"params": ContactParams JSON, "cone_runs": [...], "valid": summary, ...}``.
     """
-    import cma
-    import mujoco
-
     out_path = Path(out) if out is not None else None
     if out_path is not None and out_path.is_file():
         return json.loads(out_path.read_text())
@@ -205,7 +218,8 @@ def fit_contact_params(
     start = {"friction": float(m0.geom_friction[0, 0]), "torsional": float(m0.geom_friction[0, 1]),
              "timeconst": float(m0.geom_solref[0, 0]), "dampratio": float(m0.geom_solref[0, 1]),
              "gravity": float(m0.opt.gravity[2]), "impratio": float(m0.opt.impratio),
-             "friction_kinematic": float(m0.geom_friction[kin_geoms[0], 0]) if kin_geoms else 0.2}
+             "friction_kinematic": (float(m0.geom_friction[kin_geoms[0], 0]) if kin_geoms
+                                    else KINEMATIC_FRICTION_START)}
     t0 = time.process_time()
     runs = partial.get("cone_runs", [])
     done = {r["cone"] for r in runs}
@@ -214,13 +228,11 @@ def fit_contact_params(
             continue
         dims = list(space) + (list(ELLIPTIC_ONLY) if cone == "elliptic" else [])
         x0 = [d.unit(_nominal_value(base, d, start.get(d.name, (d.low + d.high) / 2))) for d in dims]
-        es = cma.CMAEvolutionStrategy(x0, 0.25, {"bounds": [0, 1], "seed": seed + 1,
+        es = cma.CMAEvolutionStrategy(x0, CMA_SIGMA0, {"bounds": [0, 1], "seed": seed + 1,
                                                   "maxfevals": evaluations, "verbose": -9})
         history = []
         bar = None
         if progress:
-            from tqdm import tqdm
-
             bar = tqdm(total=evaluations, desc=f"fit MuJoCo ({cone} cone)", unit="eval",
                        leave=False)
         while not es.stop():
@@ -259,7 +271,7 @@ def fit_contact_params(
     sub_res = {}
     for n in substeps:  # the timestep, chosen on validation with the other parameters fixed
         p = replace(chosen, substeps=int(n))
-        if p.timeconst is not None and p.timeconst < 2 * (valid[0].dt / n):
+        if p.timeconst is not None and p.timeconst < MIN_TIMECONST_STEPS * (valid[0].dt / n):
             continue  # MuJoCo needs timeconst >= 2 timesteps for a stable contact
         errs = valid_set.frame_errors(valid_set.predict(p))
         sub_res[int(n)] = {"valid_loss": replay_loss(errs, given), "valid": summary(errs, horizon)}
@@ -284,15 +296,10 @@ def fit_contact_params(
 
 
 def env_parameters(params: ContactParams, dt: float, source: str) -> dict[str, Any]:
-    """The fitted parameters in the ``CubeToss-v0`` env's JSON form (``friction`` as MuJoCo's
-    three numbers, ``timestep`` = ``dt / substeps``; keys the fit left alone are omitted)."""
-    out: dict[str, Any] = {"source": source}
-    if params.friction is not None:
-        out["friction"] = [params.friction, params.torsional if params.torsional is not None
-                           else 0.005, params.rolling if params.rolling is not None else 0.0001]
-    for k in ("timeconst", "dampratio", "cone", "impratio", "gravity"):
-        v = getattr(params, k)
-        if v is not None:
-            out[k] = v
-    out["timestep"] = dt / params.substeps
-    return out
+    """The fitted parameters as shipped next to a model (``pretrained/<name>.mujoco.json``, read by
+    the envs and ``evaluate --against mujoco:<name>``): :meth:`ContactParams.to_json` with
+    ``source``. The fit must have chosen its substeps (``dt / substeps`` is the timestep)."""
+    if params.substeps is None:
+        raise ValueError(f"fitted parameters without substeps: the timestep for data steps of {dt} s "
+                         "is undefined")
+    return replace(params, source=source).to_json()
