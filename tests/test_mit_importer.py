@@ -26,6 +26,7 @@ from fignet_gym.data.mit import (
     push_windows,
     read_push,
 )
+from fignet_gym.data.mit_scene import convex_pieces
 
 SAMPLE = Path(__file__).parent / "data" / "mit_sample"
 RAW = "motion_surface={surface}_shape={shape}_a={a}_v=20_i=0.000_s=0.500_t=0.349{ext}"
@@ -218,13 +219,14 @@ def test_sample_windows_start_at_contact_and_mujoco_agrees(sample_report) -> Non
     start = windows[0].metadata["window_start_s"]
     assert 0.17 < start < 0.224
     assert windows[0].dt == 0.012 and windows[0].num_steps == 43  # 42 steps: 0.504 s
-    # MuJoCo's own distance between the tip and the imported prism, in the contact frames (a
-    # convex ellipse: MuJoCo collides a mesh's convex hull, and this butter push is in a waist)
-    push = next(p for p in pushes if "ellip3_a=0_v=75_i=0.000_s=0.800" in p.path.name)
-    traj = push_windows(push, report.shapes["ellip3"].offset, MitProtocol())[0]
+    # MuJoCo's own distance between the tip and the imported object, in the contact frames: this
+    # push is in one of the butter's waists, where the convex hull would be 12 mm deep
+    traj = windows[0]
     model = mujoco.MjModel.from_xml_string(traj.mjcf)
     data = mujoco.MjData(model)
-    obj_g, tip_g = model.geom("object").id, model.geom("tip").id
+    pieces = [g for g in range(model.ngeom) if model.geom_bodyid[g] == model.body("object").id]
+    tip_g = model.geom("tip").id
+    assert len(pieces) > 1
     moving = geo.contact_mask(np.arange(traj.num_steps) * traj.dt,
                               np.column_stack([traj.poses[:, 1, :2],
                                                np.unwrap(_yaw(traj.poses[:, 1, 3:]))]))
@@ -233,7 +235,8 @@ def test_sample_windows_start_at_contact_and_mujoco_agrees(sample_report) -> Non
         data.qpos[:7] = traj.poses[k, 1]
         data.mocap_pos[0], data.mocap_quat[0] = traj.poses[k, 2, :3], traj.poses[k, 2, 3:]
         mujoco.mj_kinematics(model, data)
-        dists.append(mujoco.mj_geomDistance(model, data, obj_g, tip_g, 0.05, None))
+        dists.append(min(mujoco.mj_geomDistance(model, data, g, tip_g, 0.05, None)
+                         for g in pieces))
     assert len(dists) > 10
     assert np.mean(np.array(dists) < -geo.INSIDE_TOLERANCE) < 0.05
     assert abs(float(np.median(dists))) < 0.001
@@ -258,3 +261,19 @@ def test_too_few_pushes_keep_no_offset_and_say_so(sample_report) -> None:
     report = analyse(one, MitProtocol())
     assert report.shapes["ellip3"].offset.status == "default"
     assert report.shapes["ellip3"].offset.theta == 0.0
+
+
+@pytest.mark.parametrize("shape", geo.MIT_SHAPES)
+def test_convex_pieces_tile_the_outline(shape: str) -> None:
+    poly = geo.outline(shape)
+    pieces = convex_pieces(poly)
+    assert all(geo.polygon_area(p) > 0 for p in pieces)
+    assert sum(geo.polygon_area(p) for p in pieces) == pytest.approx(geo.polygon_area(poly))
+    pts = np.random.default_rng(0).uniform(poly.min(0), poly.max(0), size=(2000, 2))
+    inside = geo.signed_distance(pts, poly) < 0
+    in_piece = np.stack([geo.signed_distance(pts, p) < 1e-12 for p in pieces]).any(axis=0)
+    far = np.abs(geo.signed_distance(pts, poly)) > 1e-9
+    np.testing.assert_array_equal(inside[far], in_piece[far])
+    for p in pieces:  # each piece convex: every turn is to the left
+        d = np.roll(p, -1, 0) - p
+        assert np.all(d[:, 0] * np.roll(d[:, 1], -1) - d[:, 1] * np.roll(d[:, 0], -1) > -1e-12)
