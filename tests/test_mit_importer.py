@@ -22,6 +22,7 @@ from fignet_gym.data.mit import (
     MitSelection,
     analyse,
     import_mit,
+    offsets_from_report,
     parse_mit_name,
     push_windows,
     read_push,
@@ -277,3 +278,44 @@ def test_convex_pieces_tile_the_outline(shape: str) -> None:
     for p in pieces:  # each piece convex: every turn is to the left
         d = np.roll(p, -1, 0) - p
         assert np.all(d[:, 0] * np.roll(d[:, 1], -1) - d[:, 1] * np.roll(d[:, 0], -1) > -1e-12)
+
+
+def test_offsets_from_a_report_are_used_as_given(tmp_path: Path, sample_report) -> None:
+    _, report = sample_report
+    path = tmp_path / "check.json"
+    path.write_text(json.dumps(report.as_json()))
+    given = offsets_from_report(path)
+    assert set(given) == {"butter", "ellip3"}
+    assert given["butter"][0] == pytest.approx(report.shapes["butter"].offset.theta)
+    out = tmp_path / "w.h5"
+    again = import_mit([SAMPLE], out, protocol=MitProtocol(offsets=given))
+    assert again.shapes["butter"].offset.status == "given"
+    assert again.windows == len(load_trajectories(out)) >= 4
+    meta = load_trajectories(out)[0].metadata
+    assert meta["frame_offset"]["status"] == "given"
+
+
+def test_still_pushes_are_in_the_file_and_kept_on_request(tmp_path: Path) -> None:
+    from fignet_gym.data.format import TrajectoryFile
+
+    out = tmp_path / "a.h5"
+    import_mit([SAMPLE], out)
+    with TrajectoryFile(out) as f:
+        files = {f[i].metadata["file"] for i in range(len(f))}
+        check = f.metadata["check"]
+    still = "motion_surface=abs_shape=butter_a=0_v=50_i=0.000_s=0.850_t=1.396.h5"
+    assert still not in files and check["shapes"]["butter"]["still_pushes"] == [still]
+    import_mit([SAMPLE], tmp_path / "b.h5", protocol=MitProtocol(keep_still=True))
+    assert still in {t.metadata["file"] for t in load_trajectories(tmp_path / "b.h5")}
+
+
+def test_moving_mask_ignores_tracking_noise_at_rest() -> None:
+    rng = np.random.default_rng(0)
+    times = np.arange(500) * 0.004
+    rest = np.column_stack([np.zeros(500), np.zeros(500), np.zeros(500)])
+    noisy = rest + rng.normal(size=rest.shape) * [5e-4, 5e-4, math.radians(0.5)]
+    assert not geo.contact_mask(times, noisy).any()  # 0.5 mm white noise reads ~18 mm/s
+    moving = noisy.copy()
+    moving[250:, 0] += 0.2 * (times[250:] - times[250])  # 200 mm/s from sample 250 on
+    mask = geo.contact_mask(times, moving)
+    assert mask[270:490].all() and not mask[:230].any()

@@ -134,17 +134,21 @@ def _mit_selection(args: argparse.Namespace):  # -> fignet_gym.data.mit.MitSelec
 
 
 def _mit_protocol(args: argparse.Namespace):  # -> fignet_gym.data.mit.MitProtocol
-    from fignet_gym.data.mit import MitProtocol
+    from fignet_gym.data.mit import MitProtocol, offsets_from_report
 
     if args.outlines is not None and not Path(args.outlines).is_dir():
         raise FileNotFoundError(f"--outlines {args.outlines}: no such folder (it holds "
                                 "<shape>_ext.npy outlines)")
+    if args.offsets is not None and not Path(args.offsets).is_file():
+        raise FileNotFoundError(f"--offsets {args.offsets}: no such file (a --report / --json "
+                                "of import-mit or check-mit)")
     return MitProtocol(dt=getattr(args, "dt", MitProtocol.dt),
                        window=getattr(args, "duration", MitProtocol.window),
                        start=getattr(args, "start", MitProtocol.start),
                        keep_still=getattr(args, "keep_still", False),
                        friction=getattr(args, "friction", MitProtocol.friction),
-                       outlines=args.outlines)
+                       outlines=args.outlines,
+                       offsets=offsets_from_report(args.offsets) if args.offsets else None)
 
 
 def _write_report(report, path: str | None) -> None:  # report: fignet_gym.data.mit.MitReport
@@ -186,9 +190,11 @@ def _check_mit(args: argparse.Namespace) -> int:
     if not report.shapes:
         raise ValueError(f"{', '.join(args.paths)}: no MIT push matched the selection")
     _write_report(report, args.json)
-    worst = max(report.shapes.values(), key=lambda c: c.inside_fraction)
-    print(f"worst: {worst.shape}, tip more than {INSIDE_TOLERANCE * 1e3:g} mm inside in "
-          f"{100 * worst.inside_fraction:.1f}% of its contact frames")
+    checked = [c for c in report.shapes.values() if len(c.distances)]
+    if checked:
+        worst = max(checked, key=lambda c: c.inside_fraction)
+        print(f"worst: {worst.shape}, tip more than {INSIDE_TOLERANCE * 1e3:g} mm inside in "
+              f"{100 * worst.inside_fraction:.1f}% of its contact frames")
     return 0
 
 
@@ -237,6 +243,9 @@ def _mit_selection_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--any-acceleration", action="store_true")
     p.add_argument("--outlines", default=None,
                    help="folder of <shape>_ext.npy outlines (default: the shipped ones)")
+    p.add_argument("--offsets", default=None,
+                   help="use the frame offsets of this report (--report / --json of an earlier "
+                   "import-mit or check-mit) instead of measuring them; other shapes are measured")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

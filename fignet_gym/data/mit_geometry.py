@@ -36,6 +36,9 @@ MIT_SHAPES = ("rect1", "rect2", "rect3", "tri1", "tri2", "tri3", "ellip1", "elli
 #: not used: yaw noise at the tip's lever arm reads as several mm/s while the object rests.
 CONTACT_SPEED = 0.005
 SPEED_ARM = 0.05
+#: A noisy track must also move faster than this many times its noise's speed reading.
+NOISE_SIGMAS = 4.0
+_MAD_TO_SIGMA = 1.4826
 #: Half-width (s) of the central difference behind that speed (about 5 samples at 250 Hz).
 SPEED_HALF_WINDOW = 0.02
 #: A push "moves the object" when some point of its outline ends up this far (m) from where it
@@ -146,13 +149,36 @@ def central_speed(times: np.ndarray, track: np.ndarray, arm: float = 0.0) -> np.
     return speed
 
 
+def track_noise(track: np.ndarray) -> np.ndarray:
+    """``float[C]`` white-noise level of each column of ``track float[T, C]`` (its units), from the
+    second differences (a robust MAD; real motion adds almost nothing to them at 250 Hz)."""
+    if len(track) < 3:
+        return np.zeros(track.shape[1])
+    second = track[2:] - 2 * track[1:-1] + track[:-2]
+    mad = np.median(np.abs(second - np.median(second, axis=0)), axis=0)
+    return _MAD_TO_SIGMA * mad / math.sqrt(6.0)  # var(x0 - 2 x1 + x2) = 6 var(x)
+
+
+def moving_mask(times: np.ndarray, track: np.ndarray, arm: float = 0.0) -> np.ndarray:
+    """``bool[T]``: samples where ``track float[T, 2 or 3]`` (x, y[, unwrapped yaw]) moves faster
+    than ``CONTACT_SPEED``, or than ``NOISE_SIGMAS`` times the speed its own tracking noise
+    would read (noisy tracks: the speed of a resting object is not zero)."""
+    n = len(times)
+    dt = max(float(np.median(np.diff(times))), 1e-6) if n > 1 else 1.0
+    k = max(1, int(round(SPEED_HALF_WINDOW / dt)))
+    noise = track_noise(track)
+    pos_noise = max(float(noise[:2].max()), float(noise[2]) * arm if len(noise) > 2 else 0.0)
+    floor = NOISE_SIGMAS * math.sqrt(2.0) * pos_noise / (2 * k * dt)
+    return central_speed(times, track, arm) > max(CONTACT_SPEED, floor)
+
+
 def contact_mask(times: np.ndarray, obj: np.ndarray) -> np.ndarray:
     """``bool[T]``: frames where the tracked object moves (only the tip moves it).
 
     ``times float[T]`` (s), ``obj float[T, 3]`` (x, y, unwrapped yaw); a turn counts at
     ``SPEED_ARM`` from the origin.
     """
-    return central_speed(times, obj, SPEED_ARM) > CONTACT_SPEED
+    return moving_mask(times, obj, SPEED_ARM)
 
 
 def max_motion(obj: np.ndarray, poly: np.ndarray) -> float:
@@ -174,7 +200,8 @@ class FrameOffset:
     Attributes:
         theta: rad. shift: ``(dx, dy)`` m.
         status: ``"measured"``; ``"symmetric"`` (rotation cannot matter: it is set to 0, the
-            shift is measured); ``"default"`` (too few contact frames: no offset, flagged).
+            shift is measured); ``"default"`` (too few contact frames: no offset, flagged);
+            ``"given"`` (by the user, e.g. measured on a larger folder).
         pushes, frames: how many pushes and contact frames the estimate used.
     """
 
