@@ -189,7 +189,7 @@ def test_sample_offsets_are_the_quarter_turns_and_the_tip_touches(sample_report)
     # butter is symmetric under a half turn, so 90 and 270 degrees are the same offset
     assert math.degrees(butter.offset.theta) % 180 == pytest.approx(90, abs=3)
     assert math.degrees(ellip3.offset.theta) % 180 == pytest.approx(90, abs=3)
-    assert butter.offset.status == ellip3.offset.status == "measured"
+    assert butter.offset.status == ellip3.offset.status == "quarter"
     for c in (butter, ellip3):
         assert np.median(c.distances) == pytest.approx(geo.TIP_RADIUS, abs=0.0005)
         assert c.inside_fraction < 0.05
@@ -197,10 +197,13 @@ def test_sample_offsets_are_the_quarter_turns_and_the_tip_touches(sample_report)
     assert butter.still == ["motion_surface=abs_shape=butter_a=0_v=50_i=0.000_s=0.850_t=1.396.h5"]
 
 
-def test_offset_follows_a_turn_of_the_recorded_yaw_with_its_sign(sample_report) -> None:
+def test_offset_follows_a_turn_of_the_recorded_yaw_with_its_sign(sample_report,
+                                                                  monkeypatch) -> None:
     """Recorded yaw + 20 deg: a recorded-frame point is 20 deg back, so theta grows by 20 deg
     (q_outline = R(theta) q_recorded). With the convention flipped it would shrink by 20."""
-    pushes, report = sample_report
+    pushes, _ = sample_report
+    monkeypatch.setattr(geo, "QUARTER_TURN_DEG", 0.0)  # compare free rotations
+    report = analyse([p for p in pushes if p.shape == "ellip3"], MitProtocol())
     turn = 20.0
     turned = [copy.deepcopy(p) for p in pushes if p.shape == "ellip3"]
     for p in turned:
@@ -319,3 +322,9 @@ def test_moving_mask_ignores_tracking_noise_at_rest() -> None:
     moving[250:, 0] += 0.2 * (times[250:] - times[250])  # 200 mm/s from sample 250 on
     mask = geo.contact_mask(times, moving)
     assert mask[270:490].all() and not mask[:230].any()
+
+
+@pytest.mark.parametrize(("shape", "degrees"), [("rect1", 90), ("rect2", 180), ("hex", 60),
+                                                 ("tri1", 360), ("butter", 180), ("ellip3", 180)])
+def test_symmetry_angles_of_the_outlines(shape: str, degrees: float) -> None:
+    assert math.degrees(geo.symmetry_angle(geo.outline(shape))) == pytest.approx(degrees)

@@ -55,6 +55,9 @@ PAPER_WINDOW = 0.5
 CONTACT_GAP = 0.001
 #: A later window must start at least this long before the object's last moving sample (s).
 MIN_PUSHING = 0.1
+#: The floor plane's half size (m): at least this, and this much beyond the farthest sample.
+FLOOR_MIN_HALF_SIZE, FLOOR_MARGIN = 0.5, 0.2
+
 
 @dataclass(frozen=True)
 class MitSelection:
@@ -183,7 +186,8 @@ def analyse(pushes: Sequence[RawPush], protocol: MitProtocol) -> MitReport:
         contacts, still = [], []
         for p in group:
             times, obj, tip = p.tracks()
-            if geo.max_motion(obj, poly) < geo.STILL_MOTION:
+            p.still = geo.max_motion(obj, poly) < geo.STILL_MOTION
+            if p.still:
                 still.append(p.path.name)
                 continue
             contacts.append(geo.tip_in_object_frame(obj, tip)[geo.contact_mask(times, obj)])
@@ -268,7 +272,7 @@ def push_windows(push: RawPush, offset: geo.FrameOffset, protocol: MitProtocol,
         tip = resample(times, push.tip)
         force = resample(times, push.force)
         reach = float(np.abs(np.concatenate([obj[:, :2], tip])).max())
-        floor = max(0.5, float(np.ceil((reach + 0.2) * 10) / 10))  # the floor covers the motion
+        floor = max(FLOOR_MIN_HALF_SIZE, float(np.ceil((reach + FLOOR_MARGIN) * 10) / 10))
         mjcf = real_push_scene_xml(push.shape, poly_rec, obj_spec.mass, obj_spec.inertia_z,
                                    protocol.friction, floor_half_size=floor,
                                    object_pose=tuple(obj[0]), tip_xy=tuple(tip[0]))
@@ -311,13 +315,12 @@ def import_mit(paths: Iterable[str | os.PathLike], out: str | os.PathLike,
     meta = {"source": "mit_pushing", "protocol": asdict(protocol),
             "selection": {k: (list(v) if v is not None else None)
                           for k, v in asdict(selection).items()},
-            "check": report.as_json()}
+            "check": {k: v for k, v in report.as_json().items() if k == "shapes"}}
     with TrajectoryWriter(out, meta) as writer:
         for p in pushes:
-            check = report.shapes[p.shape]
-            if p.path.name in check.still and not protocol.keep_still:
+            if p.still and not protocol.keep_still:
                 continue
-            for traj in push_windows(p, check.offset, protocol, report):
+            for traj in push_windows(p, report.shapes[p.shape].offset, protocol, report):
                 try:
                     writer.add(traj)
                 except TrajectoryFormatError:

@@ -107,6 +107,7 @@ class RawPush:
         path, info, shape, surface, fmt: the file and what it says (``fmt``: raw or pdproc).
         obj: ``float[N, 4]`` (t, x, y, unwrapped yaw). tip: ``float[M, 3]`` (t, x, y).
         force: ``float[L, 4]`` (t, fx, fy, torque). t0: absolute time of ``t = 0`` (s).
+        still: set by the analysis when the push never moves the object.
     """
 
     path: Path
@@ -118,6 +119,7 @@ class RawPush:
     tip: np.ndarray
     force: np.ndarray
     t0: float = 0.0
+    still: bool = False
 
     @property
     def span(self) -> tuple[float, float]:

@@ -63,6 +63,10 @@ SYMMETRY_TOLERANCE = 0.05
 #: A tip centre closer than a radius is only noise (the tip cannot enter the steel), one farther
 #: may also be real (the tip leaving, the object coasting): the closer side weighs this much more.
 INSIDE_WEIGHT = 2.0
+#: A measured rotation this close (deg) to a quarter turn is rounded to it.
+QUARTER_TURN_DEG = 5.0
+#: An outline is symmetric under a rotation when its turned vertices stay this close (m) to it.
+SYMMETRY_MATCH = 0.0003
 #: Frames per push the estimate uses at most (evenly spaced).
 MAX_PUSH_FRAMES = 60
 #: Distance quantiles reported by the check.
@@ -199,9 +203,11 @@ class FrameOffset:
 
     Attributes:
         theta: rad. shift: ``(dx, dy)`` m.
-        status: ``"measured"``; ``"symmetric"`` (rotation cannot matter: it is set to 0, the
-            shift is measured); ``"default"`` (too few contact frames: no offset, flagged);
-            ``"given"`` (by the user, e.g. measured on a larger folder).
+        status: ``"measured"`` (free rotation); ``"quarter"`` (measured within
+            ``QUARTER_TURN_DEG`` of a quarter turn, and rounded to it); ``"symmetric"``
+            (rotation cannot matter: it is set to 0, the shift is measured); ``"default"`` (too
+            few contact frames: no offset, flagged); ``"given"`` (by the user, e.g. measured on
+            a larger folder).
         pushes, frames: how many pushes and contact frames the estimate used.
     """
 
@@ -242,6 +248,28 @@ def _thin(points: np.ndarray) -> np.ndarray:
     return points[np.linspace(0, len(points) - 1, MAX_PUSH_FRAMES).astype(int)]
 
 
+def _refine(pts: np.ndarray, w: np.ndarray, poly: np.ndarray, theta0: float,
+            free_theta: bool) -> tuple[float, np.ndarray, float]:
+    """Robust fit of the shift (and the rotation, near ``theta0``, if ``free_theta``): rotation,
+    shift ``float[2]`` and the final cost."""
+    from scipy.optimize import least_squares
+
+    sw = np.sqrt(w)  # each push's squared residuals weigh as one residual
+    prior = RESIDUAL_SCALE / SHIFT_PRIOR  # a shift of SHIFT_PRIOR costs one push's worth
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        theta = x[0] if free_theta else theta0
+        d = signed_distance(pts @ rotation(theta).T + x[1:], poly) - TIP_RADIUS
+        return np.concatenate([sw * _lopsided(d), prior * x[1:]])
+
+    step = math.radians(OFFSET_GRID_DEG) * 3 if free_theta else 1e-9
+    fit = least_squares(residuals, [theta0, 0.0, 0.0], loss="soft_l1", f_scale=RESIDUAL_SCALE,
+                        bounds=([theta0 - step, -MAX_OFFSET_SHIFT, -MAX_OFFSET_SHIFT],
+                                [theta0 + step, MAX_OFFSET_SHIFT, MAX_OFFSET_SHIFT]))
+    theta = float(fit.x[0]) if free_theta else theta0
+    return theta % (2 * math.pi), fit.x[1:].copy(), float(fit.cost)
+
+
 def estimate_offset(poly: np.ndarray, contacts: Sequence[np.ndarray]) -> FrameOffset:
     """The offset that puts the tip centre ``TIP_RADIUS`` from ``poly`` during contact.
 
@@ -250,10 +278,13 @@ def estimate_offset(poly: np.ndarray, contacts: Sequence[np.ndarray]) -> FrameOf
     grid (``OFFSET_GRID_DEG``) scored by the soft-L1 cost of ``distance - TIP_RADIUS`` is
     refined together with a shift (robust least squares, bounded by ``MAX_OFFSET_SHIFT``, with a
     prior that keeps the shift at zero where the contacts say nothing, e.g. along the one side
-    every push of a box touched). Too few pushes: :class:`FrameOffset` ``status="default"``.
+    every push of a box touched). A rotation within ``QUARTER_TURN_DEG`` of a quarter turn (up
+    to the outline's own symmetry) is rounded to it and the shift refitted: the frames differ by
+    quarter turns on the 61 ABS pushes (within 0.5 deg), while a free rotation fitted on 3-5
+    pushes drifts by 2-5 deg (split halves), enough to put the tip 1 mm inside 10-27% of the
+    other half's contact frames. A rotation farther from any quarter turn is kept as measured.
+    Too few pushes: :class:`FrameOffset` ``status="default"``.
     """
-    from scipy.optimize import least_squares
-
     used = [_thin(c) for c in contacts if len(c) >= MIN_PUSH_FRAMES]
     frames = int(sum(len(c) for c in contacts if len(c) >= MIN_PUSH_FRAMES))
     if len(used) < MIN_OFFSET_PUSHES:
@@ -263,23 +294,28 @@ def estimate_offset(poly: np.ndarray, contacts: Sequence[np.ndarray]) -> FrameOf
     grid = np.deg2rad(np.arange(0.0, 360.0, OFFSET_GRID_DEG))
     score = np.array([_robust_cost(signed_distance(pts @ rotation(a).T, poly) - TIP_RADIUS, w)
                       for a in grid])
-    symmetric = float(score.max() - score.min()) < SYMMETRY_TOLERANCE * float(score.min())
-    theta0 = 0.0 if symmetric else float(grid[int(np.argmin(score))])
-    sw = np.sqrt(w)  # each push's squared residuals weigh as one residual
-    prior = RESIDUAL_SCALE / SHIFT_PRIOR  # a shift of SHIFT_PRIOR costs one push's worth
+    if float(score.max() - score.min()) < SYMMETRY_TOLERANCE * float(score.min()):
+        _, shift, _ = _refine(pts, w, poly, 0.0, free_theta=False)
+        return FrameOffset(0.0, (float(shift[0]), float(shift[1])), "symmetric", len(used), frames)
+    theta, shift, cost = _refine(pts, w, poly, float(grid[int(np.argmin(score))]), True)
+    status = "measured"
+    sym = symmetry_angle(poly)
+    # distance to the nearest quarter turn, counting rotations the outline is invariant under
+    off = min(((theta - k * math.pi / 2 + sym / 2) % sym - sym / 2 for k in range(4)), key=abs)
+    if abs(off) <= math.radians(QUARTER_TURN_DEG):
+        theta, shift, _ = _refine(pts, w, poly, (theta - off) % (2 * math.pi), False)
+        status = "quarter"
+    return FrameOffset(theta, (float(shift[0]), float(shift[1])), status, len(used), frames)
 
-    def residuals(x: np.ndarray) -> np.ndarray:
-        theta = theta0 if symmetric else x[0]
-        d = signed_distance(pts @ rotation(theta).T + x[1:], poly) - TIP_RADIUS
-        return np.concatenate([sw * _lopsided(d), prior * x[1:]])
 
-    step = math.radians(OFFSET_GRID_DEG) * 3
-    fit = least_squares(residuals, [theta0, 0.0, 0.0], loss="soft_l1", f_scale=RESIDUAL_SCALE,
-                        bounds=([theta0 - step, -MAX_OFFSET_SHIFT, -MAX_OFFSET_SHIFT],
-                                [theta0 + step, MAX_OFFSET_SHIFT, MAX_OFFSET_SHIFT]))
-    theta = theta0 if symmetric else float(fit.x[0]) % (2 * math.pi)
-    return FrameOffset(theta, (float(fit.x[1]), float(fit.x[2])),
-                       "symmetric" if symmetric else "measured", len(used), frames)
+def symmetry_angle(poly: np.ndarray) -> float:
+    """Smallest rotation (rad) of the form ``2 pi / n`` (n <= 12) mapping ``poly float[K, 2]``
+    onto itself about the origin within ``SYMMETRY_MATCH``; ``2 pi`` when there is none."""
+    for n in range(12, 1, -1):
+        turned = poly @ rotation(2 * math.pi / n).T
+        if np.abs(signed_distance(turned, poly)).max() < SYMMETRY_MATCH:
+            return 2 * math.pi / n
+    return 2 * math.pi
 
 
 @dataclass
