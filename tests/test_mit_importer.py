@@ -328,3 +328,9 @@ def test_moving_mask_ignores_tracking_noise_at_rest() -> None:
                                                  ("tri1", 360), ("butter", 180), ("ellip3", 180)])
 def test_symmetry_angles_of_the_outlines(shape: str, degrees: float) -> None:
     assert math.degrees(geo.symmetry_angle(geo.outline(shape))) == pytest.approx(degrees)
+
+
+def test_a_window_shorter_than_a_step_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="at least one step"):
+        import_mit([SAMPLE], tmp_path / "x.h5", protocol=MitProtocol(window=0.005))
+    assert not (tmp_path / "x.h5").exists()

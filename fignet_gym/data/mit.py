@@ -310,6 +310,9 @@ def import_mit(paths: Iterable[str | os.PathLike], out: str | os.PathLike,
     protocol = protocol or MitProtocol()
     if protocol.start not in ("contact", "file"):
         raise ValueError(f"start must be 'contact' or 'file', got {protocol.start!r}")
+    if 0 < protocol.window < protocol.dt or protocol.window < 0 or protocol.dt <= 0:
+        raise ValueError(f"window (--duration) must be 0 or at least one step dt; got window "
+                         f"{protocol.window} s, dt {protocol.dt} s")
     pushes = _collect(paths, selection, skip_bad)
     report = analyse(pushes, protocol)
     meta = {"source": "mit_pushing", "protocol": asdict(protocol),
