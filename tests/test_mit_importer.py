@@ -218,10 +218,11 @@ def test_sample_windows_start_at_contact_and_mujoco_agrees(sample_report) -> Non
     pushes, report = sample_report
     push = next(p for p in pushes if "butter_a=0_v=100" in p.path.name)
     windows = push_windows(push, report.shapes["butter"].offset, MitProtocol())
-    # hand-checked on this file: the tip starts to move (0.5 mm) at 0.224 s, the object at
-    # 0.244 s; the tip rests against the butter before. The window starts just before.
+    # hand-checked on this file: the tip rests against the butter (gap 0.0 mm) until it starts
+    # to move, 0.5 mm by 0.224 s; the object has moved 0.5 mm by 0.244 s. The window starts
+    # just before: the +-20 ms speed window sees the tip move from 0.1965 s on.
     start = windows[0].metadata["window_start_s"]
-    assert 0.17 < start < 0.224
+    assert start == pytest.approx(0.1965, abs=0.004) and start < 0.224
     assert windows[0].dt == 0.012 and windows[0].num_steps == 43  # 42 steps: 0.504 s
     # MuJoCo's own distance between the tip and the imported object, in the contact frames: this
     # push is in one of the butter's waists, where the convex hull would be 12 mm deep
