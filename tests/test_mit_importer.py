@@ -128,8 +128,11 @@ def test_selection_and_cli(tmp_path: Path) -> None:
     _write_raw(src, "delrin", "rect1", 0)
     _write_raw(src, "abs", "rect1", 1000)
     out = tmp_path / "mit.h5"
-    assert import_mit([src], out, protocol=WHOLE).windows == 2  # abs, zero acceleration
+    assert import_mit([src], out, protocol=WHOLE).windows == 3  # any surface, zero acceleration
     assert {t.metadata["shape"] for t in load_trajectories(out)} == {"rect1", "hex"}
+    only_pu = MitSelection(surfaces=("pu",))
+    with pytest.raises(DataImportError, match=r"4 MIT pushes, none selected.*'abs', 'delrin'"):
+        import_mit([src], out, only_pu, protocol=WHOLE)
     sel = MitSelection(surfaces=None, shapes=("rect1",))
     assert import_mit([src], out, sel, protocol=WHOLE).windows == 2
     parser = argparse.ArgumentParser()

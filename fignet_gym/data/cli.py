@@ -175,9 +175,11 @@ def _import_mit(args: argparse.Namespace) -> int:
     _write_report(report, args.report)
     kept = "kept" if protocol.keep_still else "not imported"
     still = sum(len(c.still) for c in report.shapes.values())
-    print(f"imported {report.windows} windows of {report.pushes - (0 if protocol.keep_still else still)} "
-          f"MIT pushes into {args.out} ({still} still pushes {kept}; dt {protocol.dt} s, "
-          f"window {protocol.window or 'whole push'} s from {protocol.start})")
+    surfaces = ", ".join(f"{k} {v}" for k, v in sorted(report.surfaces.items()))
+    moved = report.pushes - (0 if protocol.keep_still else still)
+    print(f"imported {report.windows} windows of {moved} MIT pushes ({surfaces}) into {args.out} "
+          f"({still} still pushes {kept}; dt {protocol.dt} s, window "
+          f"{protocol.window or 'whole push'} s from {protocol.start})")
     return 0
 
 
@@ -188,7 +190,7 @@ def _check_mit(args: argparse.Namespace) -> int:
     report = check_mit(args.paths, _mit_selection(args), _mit_protocol(args),
                        skip_bad=args.skip_bad)
     if not report.shapes:
-        raise ValueError(f"{', '.join(args.paths)}: no MIT push matched the selection")
+        raise ValueError(f"{', '.join(args.paths)}: no MIT push file found")
     _write_report(report, args.json)
     checked = [c for c in report.shapes.values() if len(c.distances)]
     if checked:
@@ -235,7 +237,8 @@ def _mit_standin(args: argparse.Namespace) -> int:
 
 
 def _mit_selection_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--surface", nargs="+", default=["abs"], help="surfaces, or 'any'")
+    p.add_argument("--surface", nargs="+", default=["any"],
+                   help="surfaces (default: any; the paper trained on abs)")
     p.add_argument("--shape", nargs="+", default=None, help="shapes (default: all)")
     p.add_argument("--velocity", nargs="+", type=float, default=None, help="mm/s (default: all)")
     p.add_argument("--acceleration", nargs="+", type=float, default=[0.0],

@@ -61,13 +61,14 @@ FLOOR_MIN_HALF_SIZE, FLOOR_MARGIN = 0.5, 0.2
 
 @dataclass(frozen=True)
 class MitSelection:
-    """Which pushes to import (``None``: any). Defaults: the paper's (``abs``, zero acceleration).
+    """Which pushes to import (``None``: any). Defaults: constant-speed pushes (zero acceleration,
+    the paper's) on any surface (a user's folder usually holds one; the paper trained on ``abs``).
 
     Attributes:
         surfaces, shapes: names. velocities: mm/s. accelerations: mm/s^2 (``a`` of the name).
     """
 
-    surfaces: tuple[str, ...] | None = ("abs",)
+    surfaces: tuple[str, ...] | None = None
     shapes: tuple[str, ...] | None = None
     velocities: tuple[float, ...] | None = None
     accelerations: tuple[float, ...] | None = (0.0,)
@@ -126,11 +127,12 @@ class MitReport:
     shapes: dict[str, geo.ShapeCheck] = field(default_factory=dict)
     windows: int = 0
     pushes: int = 0
+    surfaces: dict[str, int] = field(default_factory=dict)
     short_windows: list[str] = field(default_factory=list)
 
     def as_json(self) -> dict[str, Any]:
         """JSON-ready summary."""
-        return {"pushes": self.pushes, "windows": self.windows,
+        return {"pushes": self.pushes, "windows": self.windows, "surfaces": self.surfaces,
                 "short_windows": self.short_windows,
                 "shapes": {k: v.as_json() for k, v in sorted(self.shapes.items())}}
 
@@ -156,28 +158,41 @@ def _outline(shape: str, protocol: MitProtocol) -> np.ndarray:
         raise DataImportError(str(err)) from None
 
 
-def _collect(paths: Iterable[str | os.PathLike], selection: MitSelection,
+def _collect(paths: Sequence[str | os.PathLike], selection: MitSelection,
              skip_bad: bool) -> list[RawPush]:
-    pushes = []
-    for f in _expand(paths, ("*.json", "*.h5")):
+    """The selected pushes; ``DataImportError`` naming what was found if none is selected."""
+    pushes, unselected = [], []
+    files = _expand(paths, ("*.json", "*.h5"))
+    for f in files:
         try:
             if not is_pdproc(f):
                 info = parse_mit_name(f)  # select on the name before reading the file
                 if not selection.accepts(info.surface, info, info.shape):
+                    unselected.append(info)
                     continue
             push = read_push(f)
             if selection.accepts(push.surface, push.info, push.shape):
                 pushes.append(push)
+            else:
+                unselected.append(push.info)
         except DataImportError as err:
             if not skip_bad:
                 raise
             warnings.warn(f"skipped: {err}", stacklevel=3)
+    if not pushes and unselected:
+        found = ", ".join(f"{k} {sorted({str(getattr(i, k)) for i in unselected})}"
+                          for k in ("surface", "shape", "acc", "vel"))
+        raise DataImportError(f"{', '.join(map(str, paths))}: {len(unselected)} MIT pushes, none "
+                              f"selected (found: {found}); see --surface, --shape, "
+                              "--acceleration / --any-acceleration, --velocity")
     return pushes
 
 
 def analyse(pushes: Sequence[RawPush], protocol: MitProtocol) -> MitReport:
     """Measure each shape's offset on its pushes and check the tip's distance in contact."""
     report = MitReport(pushes=len(pushes))
+    for p in pushes:
+        report.surfaces[str(p.surface)] = report.surfaces.get(str(p.surface), 0) + 1
     by_shape: dict[str, list[RawPush]] = {}
     for p in pushes:
         by_shape.setdefault(p.shape, []).append(p)
@@ -295,7 +310,7 @@ def check_mit(paths: Iterable[str | os.PathLike], selection: MitSelection | None
               protocol: MitProtocol | None = None, skip_bad: bool = False) -> MitReport:
     """The geometry check alone: per shape, the offset found and the tip's distance in contact."""
     protocol = protocol or MitProtocol()
-    return analyse(_collect(paths, selection or MitSelection(), skip_bad), protocol)
+    return analyse(_collect(list(paths), selection or MitSelection(), skip_bad), protocol)
 
 
 def import_mit(paths: Iterable[str | os.PathLike], out: str | os.PathLike,
@@ -313,7 +328,7 @@ def import_mit(paths: Iterable[str | os.PathLike], out: str | os.PathLike,
     if 0 < protocol.window < protocol.dt or protocol.window < 0 or protocol.dt <= 0:
         raise ValueError(f"window (--duration) must be 0 or at least one step dt; got window "
                          f"{protocol.window} s, dt {protocol.dt} s")
-    pushes = _collect(paths, selection, skip_bad)
+    pushes = _collect(list(paths), selection, skip_bad)
     report = analyse(pushes, protocol)
     meta = {"source": "mit_pushing", "protocol": asdict(protocol),
             "selection": {k: (list(v) if v is not None else None)
