@@ -263,12 +263,16 @@ def test_check_cli_reports_every_shape(tmp_path: Path, capsys) -> None:
     assert check["shapes"]["butter"]["inside_fraction"] < 0.05
 
 
-def test_too_few_pushes_keep_no_offset_and_say_so(sample_report) -> None:
+def test_too_few_pushes_fall_back_to_the_reference_or_to_none(sample_report,
+                                                             tmp_path: Path) -> None:
     pushes, _ = sample_report
     one = [p for p in pushes if p.shape == "ellip3"][:1]
-    report = analyse(one, MitProtocol())
-    assert report.shapes["ellip3"].offset.status == "default"
-    assert report.shapes["ellip3"].offset.theta == 0.0
+    offset = analyse(one, MitProtocol()).shapes["ellip3"].offset
+    assert offset.status == "reference" and math.degrees(offset.theta) == pytest.approx(90)
+    # the user's own outlines may have another frame: no reference, no offset, flagged
+    (tmp_path / "ellip3_ext.npy").write_bytes((geo.outline_dir() / "ellip3_ext.npy").read_bytes())
+    offset = analyse(one, MitProtocol(outlines=str(tmp_path))).shapes["ellip3"].offset
+    assert offset.status == "default" and offset.theta == 0.0
 
 
 @pytest.mark.parametrize("shape", geo.MIT_SHAPES)

@@ -8,6 +8,8 @@ any folder:
 1. per shape, the offset between the tracked yaw and the dataset's outline is measured on the
    pushes given (:func:`fignet_gym.data.mit_geometry.estimate_offset`); the scene's prism is the
    real outline (12.7 mm) in the recorded frame;
+   (too few pushes: the offset measured on the ABS pushes if the shape has one, else none; the
+   report says which);
 2. a push that never moves the object (no outline point travels ``STILL_MOTION``) is reported
    and, unless ``keep_still``, not imported;
 3. windows start at first contact (the first sample with the moving tip within ``CONTACT_GAP`` of
@@ -120,6 +122,12 @@ def offsets_from_report(path: str | os.PathLike) -> dict[str, tuple[float, float
                               f"(shapes.<shape>.offset.theta_deg, shift_mm): {err!r}") from None
 
 
+def reference_offsets() -> dict[str, tuple[float, float, float]]:
+    """Offsets of the shipped outlines measured on the 61 ABS pushes (butter, ellip1, ellip3, hex,
+    rect1), the fallback for a shape the pushes being imported cannot determine."""
+    return offsets_from_report(geo.outline_dir() / "reference_offsets.json")
+
+
 @dataclass
 class MitReport:
     """What an import or a check found: per-shape contact checks, windows and still pushes."""
@@ -212,6 +220,11 @@ def analyse(pushes: Sequence[RawPush], protocol: MitProtocol) -> MitReport:
                                      sum(len(c) for c in contacts))
         else:
             offset = geo.estimate_offset(poly, contacts)
+        if offset.status == "default" and protocol.outlines is None:
+            ref = reference_offsets().get(shape)  # the shipped outlines' offset on the ABS pushes
+            if ref is not None:
+                offset = geo.FrameOffset(ref[0], (ref[1], ref[2]), "reference", offset.pushes,
+                                         offset.frames)
         dist = [geo.signed_distance(offset.to_outline_frame(c), poly) for c in contacts if len(c)]
         report.shapes[shape] = geo.ShapeCheck(shape, offset, np.concatenate(dist) if dist
                                               else np.zeros(0), len(group), still)

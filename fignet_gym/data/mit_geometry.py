@@ -73,7 +73,8 @@ MAX_PUSH_FRAMES = 60
 QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
 
 
-def _outline_dir() -> Path:
+def outline_dir() -> Path:
+    """Folder of the shipped outlines (and their README, licence, reference offsets)."""
     return Path(str(resources.files("fignet_gym.data") / "mit_objects"))
 
 
@@ -93,7 +94,7 @@ def outline(shape: str, folder: str | Path | None = None) -> np.ndarray:
 
     ``folder`` holds ``<shape>_ext.npy`` files (default: the shipped outlines of the dataset).
     """
-    root = Path(folder) if folder is not None else _outline_dir()
+    root = Path(folder) if folder is not None else outline_dir()
     path = root / f"{shape}_ext.npy"
     if not path.is_file():
         have = sorted(p.name[: -len("_ext.npy")] for p in root.glob("*_ext.npy"))
@@ -206,8 +207,9 @@ class FrameOffset:
         status: ``"measured"`` (free rotation); ``"quarter"`` (measured within
             ``QUARTER_TURN_DEG`` of a quarter turn, and rounded to it); ``"symmetric"``
             (rotation cannot matter: it is set to 0, the shift is measured); ``"default"`` (too
-            few contact frames: no offset, flagged); ``"given"`` (by the user, e.g. measured on
-            a larger folder).
+            few contact frames: no offset, flagged); ``"reference"`` (too few, and the offset
+            measured on the ABS pushes is used); ``"given"`` (by the user, e.g. measured on a
+            larger folder).
         pushes, frames: how many pushes and contact frames the estimate used.
     """
 
