@@ -195,7 +195,7 @@ def _outline_distance(outline: np.ndarray, p: np.ndarray) -> float:
 
 
 def test_mit_standin_has_noise_per_push_friction_and_pusher_penetration(tmp_path: Path) -> None:
-    from fignet_gym.data.importers import import_mit
+    from fignet_gym.data.mit import MitProtocol, import_mit
     from fignet_gym.mjcf import MIT_OBJECTS
 
     raw = tmp_path / "raw"
@@ -203,7 +203,8 @@ def test_mit_standin_has_noise_per_push_friction_and_pusher_penetration(tmp_path
     files = sorted(raw.glob("*.json"))
     frictions = {json.loads(f.read_text())["standin"]["friction"] for f in files}
     assert len(files) == 3 and len(frictions) == 3
-    assert import_mit([raw], tmp_path / "p.h5", max_duration=None) == 3
+    whole = MitProtocol(dt=0.02, window=0.0, start="file", keep_still=True)
+    assert import_mit([raw], tmp_path / "p.h5", protocol=whole).windows == 3
     closest = []
     for t in load_trajectories(tmp_path / "p.h5"):
         obj, tip = t.poses[:, 1], t.poses[:, 2]

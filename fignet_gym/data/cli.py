@@ -1,5 +1,5 @@
-"""Data subcommands of ``fignet-gym``: ``generate``, ``show``, ``import-mit``, ``import-movi``,
-``import-contactnets``, ``split``.
+"""Data subcommands of ``fignet-gym``: ``generate``, ``show``, ``import-mit``, ``check-mit``,
+``import-movi``, ``import-contactnets``, ``split``.
 
 :func:`register` adds them to the main parser's subparsers; each sets ``func`` to a callable that
 takes the parsed arguments and returns an exit code. Known bad input (malformed files, unknown
@@ -123,19 +123,80 @@ def _show(args: argparse.Namespace) -> int:
     return 0
 
 
-def _import_mit(args: argparse.Namespace) -> int:
-    from fignet_gym.data.importers import MitSelection, import_mit
+def _mit_selection(args: argparse.Namespace):  # -> fignet_gym.data.mit.MitSelection
+    from fignet_gym.data.mit import MitSelection
 
-    sel = MitSelection(
+    return MitSelection(
         surfaces=None if "any" in args.surface else tuple(args.surface),
         shapes=tuple(args.shape) if args.shape else None,
         velocities=tuple(args.velocity) if args.velocity else None,
         accelerations=None if args.any_acceleration else tuple(args.acceleration))
-    n = import_mit(args.paths, args.out, sel, dt=args.dt,
-                   max_duration=args.duration if args.duration > 0 else None,
-                   friction=args.friction, skip_bad=args.skip_bad)
-    _refuse_empty(n, args.out)
-    print(f"imported {n} MIT pushes into {args.out}")
+
+
+def _mit_protocol(args: argparse.Namespace):  # -> fignet_gym.data.mit.MitProtocol
+    from fignet_gym.data.mit import MitProtocol, offsets_from_report
+
+    if args.outlines is not None and not Path(args.outlines).is_dir():
+        raise FileNotFoundError(f"--outlines {args.outlines}: no such folder (it holds "
+                                "<shape>_ext.npy outlines)")
+    if args.offsets is not None and not Path(args.offsets).is_file():
+        raise FileNotFoundError(f"--offsets {args.offsets}: no such file (a --report / --json "
+                                "of import-mit or check-mit)")
+    return MitProtocol(dt=getattr(args, "dt", MitProtocol.dt),
+                       window=getattr(args, "duration", MitProtocol.window),
+                       start=getattr(args, "start", MitProtocol.start),
+                       keep_still=getattr(args, "keep_still", False),
+                       friction=getattr(args, "friction", MitProtocol.friction),
+                       outlines=args.outlines,
+                       offsets=offsets_from_report(args.offsets) if args.offsets else None)
+
+
+def _write_report(report, path: str | None) -> None:  # report: fignet_gym.data.mit.MitReport
+    import json
+
+    print(report.table())
+    for c in report.shapes.values():
+        for name in c.still:
+            print(f"still (never moves the object): {name}")
+    if path:
+        tmp = Path(f"{path}.tmp")  # the data layer stays below fignet_gym.atomic: same recipe
+        tmp.write_text(json.dumps(report.as_json(), indent=1))
+        os.replace(tmp, path)
+        print(f"wrote the check to {path}")
+
+
+def _import_mit(args: argparse.Namespace) -> int:
+    from fignet_gym.data.mit import import_mit
+
+    protocol = _mit_protocol(args)
+    report = import_mit(args.paths, args.out, _mit_selection(args), protocol,
+                        skip_bad=args.skip_bad)
+    _refuse_empty(report.windows, args.out)
+    _write_report(report, args.report)
+    kept = "kept" if protocol.keep_still else "not imported"
+    still = sum(len(c.still) for c in report.shapes.values())
+    surfaces = ", ".join(f"{k} {v}" for k, v in sorted(report.surfaces.items()))
+    moved = report.pushes - (0 if protocol.keep_still else still)
+    print(f"imported {report.windows} windows of {moved} MIT pushes ({surfaces}) into {args.out} "
+          f"({still} still pushes {kept}; dt {protocol.dt} s, window "
+          f"{protocol.window or 'whole push'} s from {protocol.start})")
+    return 0
+
+
+def _check_mit(args: argparse.Namespace) -> int:
+    from fignet_gym.data.mit import check_mit
+    from fignet_gym.data.mit_geometry import INSIDE_TOLERANCE
+
+    report = check_mit(args.paths, _mit_selection(args), _mit_protocol(args),
+                       skip_bad=args.skip_bad)
+    if not report.shapes:
+        raise ValueError(f"{', '.join(args.paths)}: no MIT push file found")
+    _write_report(report, args.json)
+    checked = [c for c in report.shapes.values() if len(c.distances)]
+    if checked:
+        worst = max(checked, key=lambda c: c.inside_fraction)
+        print(f"worst: {worst.shape}, tip more than {INSIDE_TOLERANCE * 1e3:g} mm inside in "
+              f"{100 * worst.inside_fraction:.1f}% of its contact frames")
     return 0
 
 
@@ -173,6 +234,21 @@ def _mit_standin(args: argparse.Namespace) -> int:
                               position_noise=args.noise)
     print(f"wrote {len(files)} stand-in MIT pushes (raw JSON) into {args.out}")
     return 0
+
+
+def _mit_selection_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--surface", nargs="+", default=["any"],
+                   help="surfaces (default: any; the paper trained on abs)")
+    p.add_argument("--shape", nargs="+", default=None, help="shapes (default: all)")
+    p.add_argument("--velocity", nargs="+", type=float, default=None, help="mm/s (default: all)")
+    p.add_argument("--acceleration", nargs="+", type=float, default=[0.0],
+                   help="the file name's 'a' (default: 0, constant speed)")
+    p.add_argument("--any-acceleration", action="store_true")
+    p.add_argument("--outlines", default=None,
+                   help="folder of <shape>_ext.npy outlines (default: the shipped ones)")
+    p.add_argument("--offsets", default=None,
+                   help="use the frame offsets of this report (--report / --json of an earlier "
+                   "import-mit or check-mit) instead of measuring them; other shapes are measured")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -214,22 +290,39 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("--distance", type=float, default=None, help="default: fitted to the motion")
     s.set_defaults(func=_guarded(_show))
 
-    m = subparsers.add_parser("import-mit", help="import MIT Pushing raw or pdproc files")
+    m = subparsers.add_parser(
+        "import-mit", help="import MIT Pushing raw or pdproc files (windows from first contact)",
+        description="Import MIT Pushing pushes: the real outlines with each shape's frame offset "
+        "measured on the pushes given, 0.5 s windows from first contact every 12 ms (the "
+        "FIGNet paper's protocol, docs/sim2real.md); prints the per-shape contact check.")
     m.add_argument("paths", nargs="+", help="files or directories (searched recursively)")
     m.add_argument("--out", required=True)
-    m.add_argument("--surface", nargs="+", default=["abs"], help="surfaces, or 'any'")
-    m.add_argument("--shape", nargs="+", default=None, help="shapes (default: all)")
-    m.add_argument("--velocity", nargs="+", type=float, default=None, help="mm/s (default: all)")
-    m.add_argument("--acceleration", nargs="+", type=float, default=[0.0],
-                   help="the file name's 'a' (default: 0, constant speed)")
-    m.add_argument("--any-acceleration", action="store_true")
-    m.add_argument("--dt", type=positive_float, default=0.02, help="resampling step (s)")
-    m.add_argument("--duration", type=float, default=0.5,
-                   help="cut each push after this many seconds (0: keep all)")
-    m.add_argument("--friction", type=float, default=0.25,
+    _mit_selection_args(m)
+    m.add_argument("--dt", type=positive_float, default=0.012,
+                   help="pose step (s; default 0.012: every 3rd sample of the 250 Hz streams)")
+    m.add_argument("--duration", type=nonnegative_float, default=0.5,
+                   help="window length (s; a long push gives several); 0: one window per push")
+    m.add_argument("--start", choices=("contact", "file"), default="contact",
+                   help="windows start at first contact (default) or at the file's first sample")
+    m.add_argument("--keep-still", action="store_true",
+                   help="also import pushes that never move the object (always reported)")
+    m.add_argument("--friction", type=nonnegative_float, default=0.25,
                    help="friction written into the MJCF (the real one is unknown)")
+    m.add_argument("--report", default=None, help="also write the check as JSON here")
     m.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
     m.set_defaults(func=_guarded(_import_mit))
+
+    ck = subparsers.add_parser(
+        "check-mit", help="check MIT pushes against the real outlines (tip distance in contact)",
+        description="Per shape: the frame offset measured on these pushes, the tip centre's "
+        "distance to the outline in contact frames (the object moving), and the fraction of "
+        "those frames with the 4.75 mm tip more than 1 mm inside the object. Writes nothing "
+        "unless --json.")
+    ck.add_argument("paths", nargs="+", help="files or directories (searched recursively)")
+    _mit_selection_args(ck)
+    ck.add_argument("--json", default=None, help="write the check as JSON here")
+    ck.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
+    ck.set_defaults(func=_guarded(_check_mit))
 
     v = subparsers.add_parser("import-movi", help="import Kubric MOVi metadata.json records")
     v.add_argument("paths", nargs="+", help="metadata.json files or directories")
