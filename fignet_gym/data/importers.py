@@ -343,7 +343,9 @@ def import_mit(paths: Iterable[str | os.PathLike], out: str | os.PathLike,
     files = _expand(paths, ("*.json", "*.h5"))
     meta = {"source": "mit_pushing", "dt": dt, "max_duration": max_duration,
             "friction_assumed": friction, "selection": _sel_json(selection)}
-    with TrajectoryWriter(out, meta) as writer:
+    from fignet_gym.data.guards import ImportWriter  # refuses short pushes and copies
+
+    with ImportWriter(out, meta) as writer:
         for f in files:
             try:
                 if _is_pdproc(f):
