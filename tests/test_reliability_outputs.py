@@ -13,8 +13,11 @@ import os
 import re
 import shutil
 import signal
+import subprocess
+import sys
+import time
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -33,6 +36,9 @@ from fignet_gym.data.tracked import import_contactnets
 SAMPLE = Path(__file__).parent / "data" / "contactnets_sample"
 #: A plan run short enough for the default test run: the idle baseline, no planning.
 PLAN = ["plan", "--env", "fignet_gym/Push-v1", "--planner", "idle", "--episodes", "2"]
+#: Longest wait (s) for a killed run to reach its kill point, or for a run to finish (a shared,
+#: busy machine: a limit against hanging, not a timing check).
+KILL_WAIT_SECONDS = 3600
 
 
 def one_error_line(capsys: pytest.CaptureFixture[str], *needles: str) -> str:
@@ -461,3 +467,86 @@ def test_split_into_a_file_is_refused_and_leaves_no_temporary_folder(
     assert main(["split", str(cube_file), "--out", str(afile), "--fractions", "0.5", "0.25", "0.25"]) == 2
     one_error_line(capsys, "afile", "must be a folder")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"] and afile.read_text() == "mine"
+
+
+# ----------------------------------------------------------------------------- kill and resume
+def _cli_process(argv: list[str], cwd: Path) -> subprocess.Popen:
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    return subprocess.Popen([sys.executable, "-m", "fignet_gym", *argv], cwd=cwd, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+
+def _kill_when(proc: subprocess.Popen, ready: Callable[[], bool], what: str) -> None:
+    """SIGKILL ``proc`` as soon as ``ready()`` (polled); fails if it ends first."""
+    deadline = time.monotonic() + KILL_WAIT_SECONDS
+    while not ready():
+        assert proc.poll() is None, f"ended before {what}: {proc.stderr.read()[-2000:]}"
+        assert time.monotonic() < deadline, f"never reached {what}"
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+
+
+def _run(argv: list[str], cwd: Path) -> None:
+    proc = _cli_process(argv, cwd)
+    _, err = proc.communicate(timeout=KILL_WAIT_SECONDS)
+    assert proc.returncode == 0, err[-3000:]
+
+
+TIMING_KEYS = ("seconds", "cpu", "wall")
+
+
+def _untimed(obj: object) -> object:
+    """``obj`` without the keys of wall or CPU times (they differ between any two runs)."""
+    if isinstance(obj, dict):
+        return {k: _untimed(v) for k, v in obj.items() if not any(t in k for t in TIMING_KEYS)}
+    if isinstance(obj, list):
+        return [_untimed(v) for v in obj]
+    return obj
+
+
+@pytest.mark.slow
+def test_plan_killed_at_any_episode_resumes_to_the_uninterrupted_run(tmp_path: Path) -> None:
+    """SIGKILL while episodes are being written (after the first row), then ``--resume``: the
+    same rows, each once, and every video (was: a kill between a row and its video lost it)."""
+    argv = ["plan", "--env", "fignet_gym/Push-v1", "--planner", "cem", "--episodes", "3",
+            "--videos", "3", "--horizon", "2", "--population", "4", "--iterations", "1",
+            "--replan-every", "1"]
+    _run([*argv, "--out", "straight"], tmp_path)
+    killed = tmp_path / "killed"
+    rows = killed / "episodes.jsonl"
+    proc = _cli_process([*argv, "--out", "killed"], tmp_path)
+    _kill_when(proc, lambda: rows.exists() and rows.read_text().count("\n") >= 1, "a row")
+    _run([*argv, "--out", "killed", "--resume"], tmp_path)
+    a, b = (json.loads((tmp_path / r / "summary.json").read_text()) for r in ("straight", "killed"))
+    assert _untimed(a) == _untimed(b)
+    assert sorted(r["seed"] for r in _rows(killed)) == [0, 1, 2]  # each episode once
+    for k in range(3):
+        assert (killed / f"episode_{k}.mp4").stat().st_size > 0
+    assert not list(killed.glob("*.partial.mp4"))
+
+
+@pytest.mark.slow
+def test_sim2real_killed_while_training_resumes_to_the_uninterrupted_run(cube_file: Path,
+                                                                         tmp_path: Path) -> None:
+    """SIGKILL once FIGNet training has started, then ``--resume`` with the same recipe: the same
+    results as a run never killed, with the recipe recorded."""
+    tiny = json.dumps({"training.valid_every": 1, "training.batch_size": 1,
+                       "training.valid_trajectories": 1, "training.checkpoint_every": 2})
+    argv = ["sim2real", "--data", str(cube_file), "--fractions", "0.5", "0.25", "0.25",
+            "--fit-evaluations", "4", "--fit-trajectories", "2", "--sizes", "2", "--budget", "6",
+            "--set", tiny, "--no-polish"]
+    _run([*argv, "--out", "straight"], tmp_path)
+    proc = _cli_process([*argv, "--out", "killed"], tmp_path)
+    _kill_when(proc, lambda: (tmp_path / "killed" / "fignet_2" / "curve.jsonl").exists(), "training")
+    _run([*argv, "--out", "killed", "--resume"], tmp_path)
+    a, b = (json.loads((tmp_path / r / "results.json").read_text()) for r in ("straight", "killed"))
+    assert b["run"]["recipe"] == {"config": "cube-real", "budget": 6, "set": json.loads(tiny),
+                                  "init": None}
+    for key in ("mujoco_nominal", "mujoco_fitted", "fit"):
+        assert _untimed(a[key]) == _untimed(b[key])
+    fa, fb = (_untimed(r["fignet"]["2"]) for r in (a, b))
+    assert fa.keys() == fb.keys()
+    for k in fa:
+        assert fa[k] == pytest.approx(fb[k], rel=1e-5), k
