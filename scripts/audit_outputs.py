@@ -141,12 +141,14 @@ def case_plan_lost_video(d: Path) -> str:
 
 
 def case_plan_two_writers(d: Path) -> str:
-    first = cli([*PLAN[:-1], "3", "--out", "run"], d, background=True)
-    for _ in range(600):  # wait until the first has started writing
+    slow = ["--videos", "50"]  # rendering makes an episode last seconds: the runs overlap
+    first = cli([*PLAN[:-1], "50", *slow, "--out", "run"], d, background=True)
+    for _ in range(1200):  # wait until the first has started writing
         if (d / "run").exists() or first.poll() is not None:
             break
         time.sleep(0.5)
-    rc, err = cli([*PLAN[:-1], "3", "--out", "run", "--resume"], d)
+    rc, err = cli([*PLAN[:-1], "3", *slow, "--out", "run", "--resume"], d)
+    first.send_signal(signal.SIGTERM)  # the first would go on for 50 episodes
     first.wait()
     seeds = [json.loads(x)["seed"] for x in (d / "run" / "episodes.jsonl").read_text().splitlines()]
     if len(seeds) != len(set(seeds)):
@@ -239,7 +241,7 @@ def case_import_contactnets_copy(d: Path) -> str:
 def case_import_mit_copy(d: Path) -> str:
     (d / "src").mkdir()
     shutil.copy(MIT_PUSH, d / "src" / MIT_PUSH.name)
-    copy = MIT_PUSH.name.replace("_t=", "_t=1")
+    copy = f"{MIT_PUSH.stem}_rep=1{MIT_PUSH.suffix}"  # the same push under another name
     shutil.copy(MIT_PUSH, d / "src" / copy)
     return refusal(*cli(["import-mit", "src", "--out", "mit.h5"], d), copy, MIT_PUSH.name)
 
