@@ -113,6 +113,7 @@ def test_a_second_writer_is_refused_and_a_dead_owners_lock_is_taken_over(tmp_pat
     ["sim2real", "--data", "x.h5", "--out", "{out}", "--no-fignet"],
     ["split", "x.h5", "--out", "{out}"],
     ["mit-standin", "--num", "1", "--out", "{out}"],
+    ["ppo", "--dynamics", "mujoco", "--steps", "64", "--out", "{out}"],
 ], ids=lambda a: a[0])
 def test_every_writing_command_refuses_an_output_in_use(argv: list[str], tmp_path: Path,
                                                         capsys: pytest.CaptureFixture[str]) -> None:

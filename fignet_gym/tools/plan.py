@@ -259,10 +259,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     """Run the episodes, print the table, write ``OUT/summary.json``; returns the summary."""
     import gymnasium as gym
     import torch
-    from tqdm import tqdm
 
     import fignet_gym.envs  # noqa: F401  (registers the environments)
-    from fignet_gym.agents import IdleAgent, RandomAgent, make_planner, run_episode
+    from fignet_gym.agents import IdleAgent, RandomAgent, make_planner
     from fignet_gym.dynamics import MujocoDynamics, make_dynamics
     from fignet_gym.envs.push import PushEnv
     from fignet_gym.envs.toss import TossEnv
@@ -309,14 +308,18 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     meta = json.loads(json.dumps(meta))  # as stored: tuples become lists
     with output_lock(out):
         rows = prepare_run_folder(out, args, meta)
-        return _run_episodes(args, env, agent, label, env_kwargs, out, rows, meta, run_episode, tqdm)
+        return _run_episodes(args, env, agent, label, env_kwargs, out, rows, meta)
 
 
 def _run_episodes(args: argparse.Namespace, env: Any, agent: Any, label: str,
                   env_kwargs: dict[str, Any], out: Path, rows: list[dict[str, Any]],
-                  meta: dict[str, Any], run_episode: Any, tqdm: Any) -> dict[str, Any]:
+                  meta: dict[str, Any]) -> dict[str, Any]:
     """The episodes not yet in ``rows`` (their seeds generated lazily: ``--episodes`` may be
     huge), each written as it finishes: its video (atomically), then its row."""
+    from tqdm import tqdm
+
+    from fignet_gym.agents import run_episode
+
     rows_path = out / ROWS
     done = {r["seed"] for r in rows}
     first, last = args.seed, args.seed + args.episodes  # seeds [first, last)
