@@ -547,7 +547,20 @@ def test_sim2real_killed_while_training_resumes_to_the_uninterrupted_run(cube_fi
                                   "init": None}
     for key in ("mujoco_nominal", "mujoco_fitted", "fit"):
         assert _untimed(a[key]) == _untimed(b[key])
-    fa, fb = (_untimed(r["fignet"]["2"]) for r in (a, b))
-    assert fa.keys() == fb.keys()
-    for k in fa:
-        assert fa[k] == pytest.approx(fb[k], rel=1e-5), k
+    _assert_close(_untimed(a["fignet"]["2"]), _untimed(b["fignet"]["2"]))
+
+
+def _assert_close(a: object, b: object, where: str = "") -> None:
+    """Nested JSON values equal, numbers to float32-level rounding (rel 1e-5)."""
+    if isinstance(a, dict):
+        assert isinstance(b, dict) and a.keys() == b.keys(), where
+        for k in a:
+            _assert_close(a[k], b[k], f"{where}.{k}")
+    elif isinstance(a, list):
+        assert isinstance(b, list) and len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            _assert_close(x, y, f"{where}[{i}]")
+    elif isinstance(a, float):
+        assert b == pytest.approx(a, rel=1e-5, nan_ok=True), where
+    else:
+        assert a == b, where
