@@ -94,14 +94,17 @@ def _ship(args: argparse.Namespace) -> int:
 
 
 def _sim2real(args: argparse.Namespace) -> int:
+    from fignet_gym.atomic import output_lock
     from fignet_gym.train.sim2real import parse_sizes, run_sim2real
 
-    run_sim2real(args.data, args.out, parse_sizes(args.sizes), fractions=args.fractions,
-                 seed=args.seed, horizon=args.horizon, resume=args.resume,
-                 fit_evaluations=args.fit_evaluations, fit_trajectories=args.fit_trajectories,
-                 fignet=not args.no_fignet, pretrain=args.pretrain, config=args.config,
-                 budget=args.budget, overrides=_overrides(args.set) or None, init=args.init,
-                 polish=not args.no_polish)
+    sizes, overrides = parse_sizes(args.sizes), _overrides(args.set) or None
+    with output_lock(args.out):  # one process per run folder
+        run_sim2real(args.data, args.out, sizes, fractions=args.fractions,
+                     seed=args.seed, horizon=args.horizon, resume=args.resume,
+                     fit_evaluations=args.fit_evaluations, fit_trajectories=args.fit_trajectories,
+                     fignet=not args.no_fignet, pretrain=args.pretrain, config=args.config,
+                     budget=args.budget, overrides=overrides, init=args.init,
+                     polish=not args.no_polish)
     return 0
 
 
@@ -275,7 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--sizes", nargs="+", default=["8", "16", "32", "64", "128", "all"],
                    help="FIGNet training-set sizes (first k of the training split; 'all')")
     r.add_argument("--resume", action="store_true", help="continue a run in OUT")
-    r.add_argument("--fractions", type=float, nargs=3, default=[0.6, 0.2, 0.2],
+    r.add_argument("--fractions", type=nonnegative_float, nargs=3, default=[0.6, 0.2, 0.2],
                    metavar=("TRAIN", "VALID", "TEST"))
     r.add_argument("--seed", type=int, default=0, help="split, fit and training seed")
     r.add_argument("--horizon", type=int_at_least(1), default=50,

@@ -39,14 +39,17 @@ def _object_motion(t: np.ndarray) -> np.ndarray:
     return np.stack([0.3 + 0.02 * t, -0.1 + 0.01 * t, 3.0 + 0.5 * t], axis=1)
 
 
-def _streams(t0: float = 1.46e9) -> dict[str, list[list[float]]]:
-    """Three unsynchronised ~250 Hz streams of unix times, like the real files."""
+def _streams(t0: float = 1.46e9, shift: float = 0.0) -> dict[str, list[list[float]]]:
+    """Three unsynchronised ~250 Hz streams of unix times, like the real files (the object and
+    tip ``shift`` m along x: distinct pushes, which the importer's copy check tells apart)."""
     t_obj = t0 + np.arange(0, 0.8, 1 / 247)
     t_tip = t0 + 0.003 + np.arange(0, 0.8, 1 / 250)
     t_ft = t0 + 0.011 + np.arange(0, 0.8, 1 / 251)
     obj = _object_motion(t_obj - t0)
+    obj[:, 0] += shift
     obj[:, 2] = np.angle(np.exp(1j * obj[:, 2]))  # wrapped to (-pi, pi], as Vicon reports
     tip = np.stack([0.2 + 0.02 * (t_tip - t0), -0.1 + 0 * t_tip, 0.1 + 0 * t_tip], 1)
+    tip[:, 0] += shift
     ft = np.stack([np.sin(t_ft - t0), 2 + 0 * t_ft, 0 * t_ft], 1)
     return {"tip_pose": np.c_[t_tip, tip].tolist(), "object_pose": np.c_[t_obj, obj].tolist(),
             "ft_wrench": np.c_[t_ft, ft].tolist()}
@@ -125,8 +128,8 @@ def test_selection_and_cli(tmp_path: Path) -> None:
     src.mkdir()
     _write_raw(src, "abs", "rect1", 0)
     _write_raw(src, "abs", "hex", 0, ext=".h5")
-    _write_raw(src, "delrin", "rect1", 0)
-    _write_raw(src, "abs", "rect1", 1000)
+    _write_raw(src, "delrin", "rect1", 0, content=_streams(shift=0.001))
+    _write_raw(src, "abs", "rect1", 1000, content=_streams(shift=0.002))
     out = tmp_path / "mit.h5"
     assert import_mit([src], out, protocol=WHOLE).windows == 3  # any surface, zero acceleration
     assert {t.metadata["shape"] for t in load_trajectories(out)} == {"rect1", "hex"}
@@ -139,7 +142,7 @@ def test_selection_and_cli(tmp_path: Path) -> None:
     register(parser.add_subparsers(dest="cmd", required=True))
     args = parser.parse_args(["import-mit", str(src), "--out", str(out), "--surface", "any",
                               "--any-acceleration", "--duration", "0", "--start", "file",
-                              "--dt", "0.02", "--keep-still"])
+                              "--dt", "0.02", "--keep-still", "--force"])
     assert args.func(args) == 0
     trajs = load_trajectories(out)
     assert len(trajs) == 4 and max(t.num_steps for t in trajs) == 40
@@ -167,7 +170,7 @@ def test_bad_input_names_file_and_field(tmp_path: Path, capsys) -> None:
     before = out.read_bytes()
     parser = argparse.ArgumentParser()
     register(parser.add_subparsers(dest="cmd", required=True))
-    args = parser.parse_args(["import-mit", str(tmp_path), "--out", str(out)])
+    args = parser.parse_args(["import-mit", str(tmp_path), "--out", str(out), "--force"])
     assert args.func(args) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "Traceback" not in err and "field '" in err

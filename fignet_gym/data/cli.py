@@ -10,12 +10,14 @@ Also runnable alone: ``python -m fignet_gym.data.cli <subcommand> ...``.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
+from fignet_gym.atomic import output_lock
 from fignet_gym.data.format import TrajectoryFormatError
 
 
@@ -79,6 +81,16 @@ def _refuse_overwrite(out: str | os.PathLike, force: bool) -> None:
         raise FileExistsError(f"{path}: already exists; pass --force to replace it")
 
 
+@contextlib.contextmanager
+def _writing(out: str | os.PathLike, force: bool) -> Iterator[None]:
+    """Refuse an existing ``out`` unless ``force`` (before anything is written), then hold the
+    lock of ``out`` for the block (one writer), checking again under it."""
+    _refuse_overwrite(out, force)
+    with output_lock(out):
+        _refuse_overwrite(out, force)  # another process may have written it in between
+        yield
+
+
 def _refuse_empty(n: int, out: str | os.PathLike) -> None:
     if n == 0:
         Path(out).unlink(missing_ok=True)
@@ -101,9 +113,9 @@ def _generate(args: argparse.Namespace) -> int:
         cfg = replace(cfg, duration=args.duration)
     if args.substeps is not None:
         cfg = replace(cfg, substeps=args.substeps)
-    _refuse_overwrite(args.out, args.force)
-    stats = generate(args.kind, args.num, args.seed, args.out, workers=args.workers, config=cfg,
-                     progress=not args.no_progress)
+    with _writing(args.out, args.force):
+        stats = generate(args.kind, args.num, args.seed, args.out, workers=args.workers,
+                         config=cfg, progress=not args.no_progress)
     print(f"wrote {stats['num']} {args.kind} trajectories to {args.out} in "
           f"{stats['seconds']:.1f} s ({stats['traj_per_s']:.2f} traj/s, {args.workers} workers)")
     return 0
@@ -169,9 +181,10 @@ def _import_mit(args: argparse.Namespace) -> int:
     from fignet_gym.data.mit import import_mit
 
     protocol = _mit_protocol(args)
-    report = import_mit(args.paths, args.out, _mit_selection(args), protocol,
-                        skip_bad=args.skip_bad)
-    _refuse_empty(report.windows, args.out)
+    with _writing(args.out, args.force):
+        report = import_mit(args.paths, args.out, _mit_selection(args), protocol,
+                            skip_bad=args.skip_bad)
+        _refuse_empty(report.windows, args.out)
     _write_report(report, args.report)
     kept = "kept" if protocol.keep_still else "not imported"
     still = sum(len(c.still) for c in report.shapes.values())
@@ -203,9 +216,10 @@ def _check_mit(args: argparse.Namespace) -> int:
 def _import_movi(args: argparse.Namespace) -> int:
     from fignet_gym.data.importers import import_movi, load_mesh_map
 
-    n = import_movi(args.paths, load_mesh_map(args.meshes), args.out, skip_bad=args.skip_bad,
-                    frame_rate=args.frame_rate, floor_half_size=args.floor_half_size)
-    _refuse_empty(n, args.out)
+    with _writing(args.out, args.force):
+        n = import_movi(args.paths, load_mesh_map(args.meshes), args.out, skip_bad=args.skip_bad,
+                        frame_rate=args.frame_rate, floor_half_size=args.floor_half_size)
+        _refuse_empty(n, args.out)
     print(f"imported {n} MOVi scenes into {args.out}")
     return 0
 
@@ -213,8 +227,9 @@ def _import_movi(args: argparse.Namespace) -> int:
 def _import_contactnets(args: argparse.Namespace) -> int:
     from fignet_gym.data.tracked import import_contactnets
 
-    n = import_contactnets(args.directory, args.out, length_unit=args.length_unit,
-                           floor_half_size=args.floor_half_size, skip_bad=args.skip_bad)
+    with _writing(args.out, args.force):
+        n = import_contactnets(args.directory, args.out, length_unit=args.length_unit,
+                               floor_half_size=args.floor_half_size, skip_bad=args.skip_bad)
     print(f"imported {n} ContactNets tosses into {args.out}")
     return 0
 
@@ -222,7 +237,8 @@ def _import_contactnets(args: argparse.Namespace) -> int:
 def _split(args: argparse.Namespace) -> int:
     from fignet_gym.data.split import write_split
 
-    paths = write_split(args.data, args.out, args.fractions, args.seed, force=args.force)
+    with output_lock(args.out):
+        paths = write_split(args.data, args.out, args.fractions, args.seed, force=args.force)
     print(f"wrote {', '.join(str(p) for p in paths.values())}")
     return 0
 
@@ -230,8 +246,9 @@ def _split(args: argparse.Namespace) -> int:
 def _mit_standin(args: argparse.Namespace) -> int:
     from fignet_gym.data.standin import write_mit_standin
 
-    files = write_mit_standin(args.out, args.num, args.seed, penetration=args.penetration,
-                              position_noise=args.noise)
+    with output_lock(args.out):
+        files = write_mit_standin(args.out, args.num, args.seed, penetration=args.penetration,
+                                  position_noise=args.noise, force=args.force)
     print(f"wrote {len(files)} stand-in MIT pushes (raw JSON) into {args.out}")
     return 0
 
@@ -309,6 +326,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     m.add_argument("--friction", type=nonnegative_float, default=0.25,
                    help="friction written into the MJCF (the real one is unknown)")
     m.add_argument("--report", default=None, help="also write the check as JSON here")
+    m.add_argument("--force", action="store_true", help="replace OUT if it exists (default: refuse)")
     m.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
     m.set_defaults(func=_guarded(_import_mit))
 
@@ -333,6 +351,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="default: the record's metadata.frame_rate, else 12")
     v.add_argument("--floor-half-size", type=positive_float, default=20.0)
     v.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
+    v.add_argument("--force", action="store_true", help="replace OUT if it exists (default: refuse)")
     v.set_defaults(func=_guarded(_import_movi))
 
     c = subparsers.add_parser("import-contactnets",
@@ -344,6 +363,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="metres per data unit (default: 9.81 / the file's g, the half-width)")
     c.add_argument("--floor-half-size", type=positive_float, default=2.0, help="floor plane half-size (m)")
     c.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
+    c.add_argument("--force", action="store_true", help="replace OUT if it exists (default: refuse)")
     c.set_defaults(func=_guarded(_import_contactnets))
 
     ms = subparsers.add_parser("mit-standin", help="stand-in MIT Pushing raw files (MuJoCo pushes "
@@ -354,12 +374,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ms.add_argument("--noise", type=nonnegative_float, default=5e-4, help="object tracking noise (m)")
     ms.add_argument("--penetration", type=nonnegative_float, default=1e-3,
                     help="how much thinner the simulated tip is than the imported scene's (m)")
+    ms.add_argument("--force", action="store_true",
+                    help="replace the stand-in pushes already in OUT (default: refuse)")
     ms.set_defaults(func=_guarded(_mit_standin))
 
     sp = subparsers.add_parser("split", help="seeded train/valid/test split of a trajectory file")
     sp.add_argument("data")
     sp.add_argument("--out", required=True, help="folder for train.h5, valid.h5, test.h5, split.json")
-    sp.add_argument("--fractions", type=float, nargs=3, default=[0.6, 0.2, 0.2],
+    sp.add_argument("--fractions", type=nonnegative_float, nargs=3, default=[0.6, 0.2, 0.2],
                     metavar=("TRAIN", "VALID", "TEST"))
     sp.add_argument("--seed", type=int, default=0)
     sp.add_argument("--force", action="store_true", help="replace a split already in OUT")

@@ -258,6 +258,8 @@ class TrajectoryWriter:
 
     def __init__(self, path: str | os.PathLike, metadata: dict[str, Any] | None = None) -> None:
         self.path = Path(path)
+        if self.path.is_dir():  # else "<dir>.incomplete" would be written beside it
+            raise TrajectoryFormatError(f"{self.path}: is a directory; the output must be a file")
         self.tmp_path = self.path.with_name(self.path.name + INCOMPLETE_SUFFIX)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file: h5py.File | None = h5py.File(self.tmp_path, "w")

@@ -35,7 +35,8 @@ from typing import Any
 import numpy as np
 
 from fignet_gym.data import mit_geometry as geo
-from fignet_gym.data.format import Trajectory, TrajectoryFormatError, TrajectoryWriter
+from fignet_gym.data.format import Trajectory, TrajectoryFormatError
+from fignet_gym.data.guards import ImportWriter
 from fignet_gym.data.importers import IMPORTER_VERSION, DataImportError, _expand
 from fignet_gym.data.mit_files import (
     MitPush,
@@ -347,7 +348,7 @@ def import_mit(paths: Iterable[str | os.PathLike], out: str | os.PathLike,
             "selection": {k: (list(v) if v is not None else None)
                           for k, v in asdict(selection).items()},
             "check": {k: v for k, v in report.as_json().items() if k == "shapes"}}
-    with TrajectoryWriter(out, meta) as writer:
+    with ImportWriter(out, meta) as writer:
         for p in pushes:
             if p.still and not protocol.keep_still:
                 continue

@@ -11,6 +11,7 @@ subset is always inside a larger one.
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 from collections.abc import Sequence
@@ -66,21 +67,44 @@ def split_indices(n: int, fractions: Sequence[float] = DEFAULT_FRACTIONS, seed: 
     each split may have; fewer raises :class:`SplitError` naming ``where`` (the file).
     """
     f = tuple(float(x) for x in fractions)
-    if len(f) != 3 or min(f) < 0 or abs(sum(f) - 1) > 1e-6:
-        raise SplitError(f"split fractions must be three non-negative numbers summing to 1, got {f}")
-    n_train = int(round(f[0] * n))
-    n_valid = int(round(f[1] * n))
-    n_test = n - n_train - n_valid
-    sizes = (n_train, n_valid, n_test)
+    if len(f) != 3 or not all(math.isfinite(x) and x >= 0 for x in f) or abs(sum(f) - 1) > 1e-6:
+        raise SplitError(f"--fractions: split fractions must be three finite non-negative numbers "
+                         f"summing to 1 (train, valid, test), got {f}")
+    sizes = _sizes(n, f)
     short = [f"{s} ({k} < {m})" for s, k, m in zip(SPLITS, sizes, min_sizes, strict=True) if k < m]
-    if n_test < 0 or short:
-        need = sum(min_sizes)
-        raise SplitError(
-            f"{where or '<data>'}: {n} trajectories are too few for the split {f} "
-            f"(too small: {', '.join(short) or 'test'}; need at least {need} trajectories)")
+    if short:
+        need = fewest_trajectories(f, min_sizes)
+        enough = (f"these fractions need at least {need} trajectories" if need is not None else
+                  "no number of trajectories is enough: raise the zero fraction")
+        raise SplitError(f"{where or '<data>'}: {n} trajectories are too few for the split {f} "
+                         f"(too small: {', '.join(short)}); {enough}")
+    n_train, n_valid, _ = sizes
     order = np.random.default_rng(seed).permutation(n).tolist()
     return Split(tuple(order[:n_train]), tuple(order[n_train:n_train + n_valid]),
                  tuple(order[n_train + n_valid:]), int(seed), f, int(n))  # type: ignore[arg-type]
+
+
+def _sizes(n: int, f: tuple[float, ...]) -> tuple[int, int, int]:
+    """Train, validation and test sizes of ``n`` trajectories split by fractions ``f``."""
+    n_train = int(round(f[0] * n))
+    n_valid = int(round(f[1] * n))
+    return n_train, n_valid, n - n_train - n_valid
+
+
+def fewest_trajectories(fractions: Sequence[float], min_sizes: Sequence[int] = (1, 1, 1)
+                        ) -> int | None:
+    """The fewest trajectories whose split by ``fractions`` gives every split its minimum size
+    (``None`` if none does: a zero fraction with a positive minimum)."""
+    f = tuple(float(x) for x in fractions)
+    if any(x == 0 and m > 0 for x, m in zip(f, min_sizes, strict=True)):
+        return None
+    # Rounding gives split i at least m_i once n f_i >= m_i + 1/2 (and the test split takes the
+    # rounding's remainder, off by at most 1): the search ends by this bound.
+    bound = max(math.ceil((m + 1.5) / x) for x, m in zip(f, min_sizes, strict=True) if x > 0)
+    for n in range(sum(min_sizes), bound + sum(min_sizes) + 1):
+        if all(k >= m for k, m in zip(_sizes(n, f), min_sizes, strict=True)):
+            return n
+    return None
 
 
 def write_split(data: str | os.PathLike, out: str | os.PathLike,
@@ -94,8 +118,11 @@ def write_split(data: str | os.PathLike, out: str | os.PathLike,
     written into a temporary sibling folder first, so a killed run leaves no partial split.
     """
     from fignet_gym.data.format import TrajectoryFile, TrajectoryWriter
+    from fignet_gym.data.guards import check_single_scene_type
 
     out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"--out {out}: is a file; --out must be a folder")
     files = [f"{s}.h5" for s in SPLITS] + ["split.json"]
     existing = [name for name in files if (out / name).exists()]
     if existing and not force:
@@ -104,6 +131,7 @@ def write_split(data: str | os.PathLike, out: str | os.PathLike,
     tmp = out.with_name(f".{out.name}.tmp")
     with TrajectoryFile(data) as f:
         split = split_indices(len(f), fractions, seed, min_sizes, where=str(data))
+        check_single_scene_type(data)
         names = f.names
         if tmp.exists():  # left by a killed run
             shutil.rmtree(tmp)
@@ -121,12 +149,15 @@ def write_split(data: str | os.PathLike, out: str | os.PathLike,
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
-    if not out.exists():
-        os.rename(tmp, out)
-    else:  # an existing folder (maybe holding other files): move the files, split.json last
-        for name in files:
-            os.replace(tmp / name, out / name)
-        tmp.rmdir()
+    try:
+        if not out.exists():
+            os.rename(tmp, out)
+        else:  # an existing folder (maybe holding other files): move the files, split.json last
+            for name in files:
+                os.replace(tmp / name, out / name)
+            tmp.rmdir()
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
     paths = {s: out / f"{s}.h5" for s in SPLITS}
     paths["json"] = out / "split.json"
     return paths

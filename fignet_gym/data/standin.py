@@ -31,6 +31,8 @@ from fignet_gym.data.generate import PushConfig, generate_push
 
 #: Sample period (s) of the simulated tracks (the real streams are ~250 Hz).
 STANDIN_PERIOD = 0.004
+#: The stand-in files (``--force`` replaces exactly these).
+STANDIN_GLOB = "motion_surface=*.json"
 #: Tip radius (m) of the importer's scene (``push_scene_xml``) and of the real pusher.
 TIP_RADIUS = 0.00475
 
@@ -46,14 +48,27 @@ def write_mit_standin(out: str | os.PathLike, num: int = 120, seed: int = 0, *,
                       tip_noise: float = 3e-4, penetration: float = 1e-3,
                       friction_range: tuple[float, float] = (0.1, 0.4),
                       tip_friction_range: tuple[float, float] = (0.1, 0.5),
-                      duration: float = 0.8) -> list[Path]:
+                      duration: float = 0.8, force: bool = False) -> list[Path]:
     """Write ``num`` stand-in pushes into ``out`` (see the module docstring); returns the files.
 
-    Push ``i`` uses ``numpy.random.default_rng([seed, i])`` for the push and its noise.
+    Push ``i`` uses ``numpy.random.default_rng([seed, i])`` for the push and its noise. A
+    folder that is not empty is refused (``import-mit`` would import its pushes together with
+    these), unless ``force``, which first deletes the stand-in pushes (``motion_surface=*.json``)
+    already there.
     """
     if not 0 <= penetration < TIP_RADIUS:
         raise ValueError(f"penetration must be in [0, {TIP_RADIUS}) m, got {penetration}")
     out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"--out {out}: is a file; --out must be a folder")
+    if out.is_dir() and any(out.iterdir()):
+        if not force:
+            first = min(p.name for p in out.iterdir())
+            raise FileExistsError(f"--out {out}: is not empty ({first}, ...): its pushes would be "
+                                  "imported with these; pass --force to replace the stand-in "
+                                  "pushes in it, or choose an empty folder")
+        for old in out.glob(STANDIN_GLOB):
+            old.unlink()
     out.mkdir(parents=True, exist_ok=True)
     cfg = replace(PushConfig(), substeps=int(round(STANDIN_PERIOD / PushConfig().timestep)),
                   duration=duration, tip_radius=TIP_RADIUS - penetration,

@@ -27,7 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from fignet_gym.data.format import Trajectory, TrajectoryFormatError, TrajectoryWriter
+from fignet_gym.data.format import Trajectory, TrajectoryFormatError
+from fignet_gym.data.guards import ImportWriter
 from fignet_gym.data.importers import IMPORTER_VERSION, DataImportError
 from fignet_gym.simulator.scene import ObjectKind, Scene, UnsupportedSceneError
 
@@ -313,7 +314,10 @@ def read_contactnets(directory: str | os.PathLike, length_unit: float | None = N
 def import_contactnets(directory: str | os.PathLike, out: str | os.PathLike,
                        length_unit: float | None = None, floor_half_size: float = 2.0,
                        skip_bad: bool = False) -> int:
-    """Import every toss of a ContactNets directory into ``out`` (atomic); returns the count."""
+    """Import every toss of a ContactNets directory into ``out`` (atomic); returns the count.
+
+    Tosses too short to score and copies of an earlier toss are refused (skipped with a warning
+    under ``skip_bad``): :class:`~fignet_gym.data.guards.ImportWriter`."""
     directory = Path(directory)
     meta = {"source": "contactnets", "directory": str(directory), "length_unit_m": length_unit,
             "importer_version": IMPORTER_VERSION,
@@ -321,8 +325,13 @@ def import_contactnets(directory: str | os.PathLike, out: str | os.PathLike,
     from tqdm import tqdm
 
     total = len(_contactnets_paths(directory)[1]) if directory.is_dir() else None
-    with TrajectoryWriter(out, meta) as writer:
+    with ImportWriter(out, meta) as writer:
         for traj in tqdm(read_contactnets(directory, length_unit, floor_half_size, skip_bad),
                          total=total, desc="import-contactnets", unit="toss", leave=False):
-            writer.add(traj)
+            try:
+                writer.add(traj)
+            except TrajectoryFormatError as err:
+                if not skip_bad:
+                    raise
+                warnings.warn(f"skipped: {err}", stacklevel=2)
     return writer.count

@@ -4,25 +4,38 @@
         --seed 0 --out runs/plan-fignet --videos 2
 
 The planner plans with ``--dynamics`` (MuJoCo, or the shipped/given FIGNet model) and acts in the
-environment with ``--act-dynamics`` (MuJoCo by default: "reality"). Each finished episode is
-appended to ``OUT/episodes.jsonl`` and ``OUT/summary.json`` is rewritten, so a killed run resumes
-with ``--resume``. ``--videos K`` writes, for the first K episodes, the episode (left) beside what
-the planning model predicted at the end of its current plan (right).
+environment with ``--act-dynamics`` (MuJoCo by default: "reality"). The settings go to
+``OUT/run.json``; each finished episode's video (if any) is written, then its row is appended to
+``OUT/episodes.jsonl`` and ``OUT/summary.json`` is rewritten, so a killed run resumes with
+``--resume`` (same settings; an episode whose video was lost is run again). An existing run is
+never replaced without ``--force``, and one process at a time writes to ``OUT`` (a lock).
+``--videos K`` writes, for the first K episodes, the episode (left) beside what the planning
+model predicted at the end of its current plan (right).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fignet_gym.atomic import write_text
+from fignet_gym.atomic import output_lock, write_text
+from fignet_gym.data.cli import int_at_least
 
 BASELINES = ("idle", "random")
+#: Environment ids ``plan`` can act in (other packages' envs have no fignet_gym task).
+ENV_NAMESPACE = "fignet_gym/"
+#: A plan run folder: settings, one row per finished episode, the summary, videos.
+SETTINGS, ROWS, SUMMARY, VIDEOS = "run.json", "episodes.jsonl", "summary.json", "episode_*.mp4"
+#: Settings that may change on ``--resume`` (they do not change what an episode does).
+RESUMABLE_CHANGES = frozenset({"threads"})
+#: Suffix of a video being written (renamed into place when complete).
+PARTIAL_VIDEO = ".partial.mp4"
 
 
 class PlanError(ValueError):
@@ -39,16 +52,91 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--planner", default="cem", choices=["cem", "mppi", *BASELINES])
     p.add_argument("--act-dynamics", default="mujoco", choices=["mujoco", "fignet"],
                    help="what the environment acts with")
-    p.add_argument("--episodes", type=int, default=10)
-    p.add_argument("--seed", type=int, default=0, help="episode k is reset with seed + k")
+    p.add_argument("--episodes", type=int_at_least(1), default=10)
+    p.add_argument("--seed", type=int_at_least(0), default=0, help="episode k is reset with seed + k")
     p.add_argument("--out", required=True, help="folder for summary.json, episodes.jsonl, videos")
-    p.add_argument("--videos", type=int, default=0, help="side-by-side videos of the first K")
-    p.add_argument("--resume", action="store_true", help="skip episodes already in OUT")
+    p.add_argument("--videos", type=int_at_least(0), default=0,
+                   help="side-by-side videos of the first K")
+    p.add_argument("--resume", action="store_true", help="skip episodes already in OUT (the "
+                   "settings must be the run's: env, planner, dynamics, checkpoint, budget, seed)")
+    p.add_argument("--force", action="store_true", help="replace a run already in OUT")
     p.add_argument("--horizon", type=int, help="override the preset planning horizon")
     p.add_argument("--population", type=int, help="override the preset candidates per iteration")
     p.add_argument("--iterations", type=int, help="override the preset iterations")
     p.add_argument("--replan-every", type=int, help="override the preset re-planning period")
-    p.add_argument("--threads", type=int, default=1, help="torch and MuJoCo rollout threads")
+    p.add_argument("--threads", type=int_at_least(1), default=1,
+                   help="torch and MuJoCo rollout threads")
+
+
+def check_arguments(args: argparse.Namespace) -> None:
+    """:class:`PlanError` for counts out of range (the parser checks them too; this guards
+    callers that build the namespace themselves)."""
+    for name, low in (("episodes", 1), ("threads", 1), ("videos", 0), ("seed", 0)):
+        value = getattr(args, name)
+        if not isinstance(value, int) or value < low:
+            raise PlanError(f"--{name} must be an integer >= {low}, got {value!r}")
+
+
+def _run_files(out: Path) -> list[Path]:
+    if not out.is_dir():
+        return []
+    named = [out / n for n in (SETTINGS, ROWS, SUMMARY) if (out / n).exists()]
+    return named + sorted(out.glob(VIDEOS))
+
+
+def prepare_run_folder(out: Path, args: argparse.Namespace, meta: dict[str, Any]) -> list[dict[str, Any]]:
+    """Make ``out`` ready for the run of ``meta`` (the settings); returns the finished rows.
+
+    Without ``--resume`` an existing run is refused unless ``--force`` (which deletes its files).
+    With ``--resume`` the stored settings must equal ``meta`` (except :data:`RESUMABLE_CHANGES`);
+    episodes whose video a kill lost (a row without its video) are dropped, to be run again.
+    """
+    if out.exists() and not out.is_dir():
+        raise PlanError(f"--out {out}: is a file; --out must be a folder")
+    existing = _run_files(out)
+    if existing and not args.resume:
+        if not args.force:
+            raise PlanError(f"--out {out}: already holds a plan run ({existing[0].name}); pass "
+                            "--resume to continue it, --force to replace it, or choose another --out")
+        for f in existing:
+            f.unlink()
+    out.mkdir(parents=True, exist_ok=True)
+    for partial in out.glob("*" + PARTIAL_VIDEO):  # a video a kill cut short
+        partial.unlink()
+    rows: list[dict[str, Any]] = []
+    if args.resume:
+        _check_settings(out, meta)
+        if (out / ROWS).exists():
+            rows = read_rows(out / ROWS)
+        kept = [r for r in rows if not _video_lost(out, r, args)]
+        if len(kept) < len(rows):
+            write_text(out / ROWS, "".join(json.dumps(r) + "\n" for r in kept))
+            rows = kept
+    write_text(out / SETTINGS, json.dumps(meta, indent=2))
+    return rows
+
+
+def _video_lost(out: Path, row: dict[str, Any], args: argparse.Namespace) -> bool:
+    return 0 <= row["seed"] - args.seed < args.videos and not (out / f"episode_{row['seed']}.mp4").exists()
+
+
+def _check_settings(out: Path, meta: dict[str, Any]) -> None:
+    """:class:`PlanError` if the run in ``out`` was made with other settings than ``meta``.
+
+    The settings are ``run.json``'s, or for runs from before it existed those ``summary.json``
+    repeats."""
+    stored_at = out / SETTINGS if (out / SETTINGS).exists() else out / SUMMARY
+    if not stored_at.exists():
+        return
+    try:
+        stored = json.loads(stored_at.read_text())
+    except ValueError:
+        raise PlanError(f"{stored_at}: not JSON; start a new run (--force) or another --out") from None
+    diffs = [f"{k} {stored[k]!r} (now {v!r})" for k, v in meta.items()
+             if k in stored and k not in RESUMABLE_CHANGES and stored[k] != v]
+    if diffs:
+        raise PlanError(f"{stored_at}: this run was made with {'; '.join(diffs)}: resume it with "
+                        "the same settings, or start a new run (--force, or another --out)")
 
 
 def read_rows(path: Path) -> list[dict[str, Any]]:
@@ -151,8 +239,10 @@ class SideBySide:
         """An mp4 of the collected frames."""
         import imageio
 
-        if self.frames:
-            imageio.mimsave(path, self.frames, fps=fps)
+        if self.frames:  # written whole, then renamed: a kill never leaves a cut video
+            partial = path.with_name(path.stem + PARTIAL_VIDEO)
+            imageio.mimsave(partial, self.frames, fps=fps)
+            os.replace(partial, path)
         self.frames = []
 
 
@@ -169,20 +259,20 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     """Run the episodes, print the table, write ``OUT/summary.json``; returns the summary."""
     import gymnasium as gym
     import torch
-    from tqdm import tqdm
 
     import fignet_gym.envs  # noqa: F401  (registers the environments)
-    from fignet_gym.agents import IdleAgent, RandomAgent, make_planner, run_episode
+    from fignet_gym.agents import IdleAgent, RandomAgent, make_planner
     from fignet_gym.dynamics import MujocoDynamics, make_dynamics
     from fignet_gym.envs.push import PushEnv
     from fignet_gym.envs.toss import TossEnv
 
-    torch.set_num_threads(max(1, args.threads))
-    if args.episodes < 1:
-        raise PlanError(f"--episodes must be >= 1, got {args.episodes}")
+    check_arguments(args)
+    torch.set_num_threads(args.threads)
+    ids = sorted(k for k in gym.registry if k.startswith(ENV_NAMESPACE))
     if args.env not in gym.registry:
-        ids = sorted(k for k in gym.registry if k.startswith("fignet_gym/"))
         raise PlanError(f"--env: unknown environment {args.env!r}; use one of {ids}")
+    if not args.env.startswith(ENV_NAMESPACE):  # another package's env takes none of our kwargs
+        raise PlanError(f"--env: {args.env} is not a fignet_gym environment; use one of {ids}")
     out = Path(args.out)
     env_kwargs = {"dynamics": args.act_dynamics}
     render = {"render_mode": "rgb_array", "width": 320, "height": 320} if args.videos else {}
@@ -210,31 +300,42 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         except ValueError as err:  # a checkpoint of another scene, a bad budget
             raise PlanError(str(err)) from None
         label = f"{args.planner.upper()} planning on {args.dynamics}, acting in {args.act_dynamics}"
-    out.mkdir(parents=True, exist_ok=True)
-    rows_path = out / "episodes.jsonl"
-    rows: list[dict[str, Any]] = []
-    if args.resume and rows_path.exists():
-        rows = read_rows(rows_path)
-    elif rows_path.exists():
-        rows_path.unlink()
-    done = {r["seed"] for r in rows}
     config = getattr(agent, "config", None)
     meta = {"env": args.env, "planner": args.planner, "dynamics": args.dynamics,
             "act_dynamics": args.act_dynamics, "checkpoint": args.checkpoint,
-            "config": config.__dict__ if config is not None else None,
+            "config": config.__dict__ if config is not None else None, "seed": args.seed,
             "threads": args.threads}
-    todo = [args.seed + k for k in range(args.episodes) if args.seed + k not in done]
-    for seed in tqdm(todo, desc=label, unit="episode"):
+    meta = json.loads(json.dumps(meta))  # as stored: tuples become lists
+    with output_lock(out):
+        rows = prepare_run_folder(out, args, meta)
+        return _run_episodes(args, env, agent, label, env_kwargs, out, rows, meta)
+
+
+def _run_episodes(args: argparse.Namespace, env: Any, agent: Any, label: str,
+                  env_kwargs: dict[str, Any], out: Path, rows: list[dict[str, Any]],
+                  meta: dict[str, Any]) -> dict[str, Any]:
+    """The episodes not yet in ``rows`` (their seeds generated lazily: ``--episodes`` may be
+    huge), each written as it finishes: its video (atomically), then its row."""
+    from tqdm import tqdm
+
+    from fignet_gym.agents import run_episode
+
+    rows_path = out / ROWS
+    done = {r["seed"] for r in rows}
+    first, last = args.seed, args.seed + args.episodes  # seeds [first, last)
+    todo = args.episodes - sum(1 for s in done if first <= s < last)
+    seeds = (s for s in range(first, last) if s not in done)
+    for seed in tqdm(seeds, total=todo, desc=label, unit="episode"):
         k = seed - args.seed
         video = SideBySide(args.env, env_kwargs, acting=args.act_dynamics) if k < args.videos else None
         t0 = time.perf_counter()
         row = {"seed": seed, **run_episode(env, agent, seed=seed, on_step=video)}
         row["seconds"] = time.perf_counter() - t0
+        if video is not None:  # before the row: a row on disk means its video is there too
+            video.write(out / f"episode_{seed}.mp4", env.metadata["render_fps"])
         rows.append(row)
         with rows_path.open("a") as f:
             f.write(json.dumps(row) + "\n")
-        if video is not None:
-            video.write(out / f"episode_{seed}.mp4", env.metadata["render_fps"])
         summary = {**meta, **summarize(rows), "rows": sorted(rows, key=lambda r: r["seed"])}
         write_text(out / "summary.json", json.dumps(summary, indent=2))
     rows.sort(key=lambda r: r["seed"])

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from fignet_gym.agents.ppo import PPOConfig
 from fignet_gym.agents.ppo_run import RunConfig, RunError, plot_curves, run_ppo, transfer_table
+from fignet_gym.atomic import output_lock
 
 
 def _error(message: str) -> int:
@@ -62,7 +63,8 @@ def run_ppo_command(args: argparse.Namespace) -> int:
             return _error(f"--compare {run}: no final_eval.json (not a finished `fignet-gym ppo` run)")
     try:
         cfg = config_from_args(args)
-        run_ppo(args.out, cfg, resume=args.resume, force=args.force, progress=not args.quiet)
+        with output_lock(args.out):  # one process per run folder
+            run_ppo(args.out, cfg, resume=args.resume, force=args.force, progress=not args.quiet)
         print(transfer_table([args.out, *args.compare]))
     except (RunError, ValueError) as err:
         return _error(str(err))

@@ -2,7 +2,9 @@
 on one real (or stand-in) trajectory file, scored on a held-out split.
 
 Stages, each written to ``OUT`` as it finishes (``--resume`` skips finished ones; a killed FIGNet
-run resumes from its last checkpoint):
+run resumes from its last checkpoint). ``run.json`` records the options, the FIGNet recipe
+(``--config``, ``--budget``, ``--set``, ``--init``) included: a resume with other ones is refused,
+so one table never compares sizes trained differently. A file mixing scene types is refused.
 
 1. ``split/``: seeded train / validation / test files (:func:`~fignet_gym.data.split.write_split`).
 2. ``mujoco_nominal.json``: MuJoCo with the MJCF's own parameters replaying the test split.
@@ -40,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from fignet_gym.atomic import write_text
+from fignet_gym.data.guards import check_single_scene_type
 from fignet_gym.data.split import DEFAULT_FRACTIONS, write_split
 
 TrainFn = Callable[[Path, Path, "int | None", Path], Path]
@@ -159,7 +162,6 @@ def run_sim2real(
     if out.exists() and any(out.iterdir()) and not resume:
         raise Sim2RealError(f"{out}: already holds a sim2real run (pass --resume to continue it, "
                             "or choose another --out)")
-    out.mkdir(parents=True, exist_ok=True)
     config_path = out / "run.json"
     run_cfg = {"data": str(data), "fractions": list(fractions), "seed": seed, "horizon": horizon,
                "given_poses": given, "fit_evaluations": fit_evaluations,
@@ -173,9 +175,14 @@ def run_sim2real(
         raise Sim2RealError(f"{config_path}: this run was started with {', '.join(changed)}: "
                             "resume it with the same options (--no-polish for polish False) or "
                             "use another --out")
+    recipe = _recipe(train_fn, config, budget, overrides, init) if fignet else None
+    run_cfg["recipe"] = _check_recipe(config_path, (old or {}).get("recipe"), recipe)
+    split_dir = out / "split"
+    if not (split_dir / "split.json").is_file():
+        check_single_scene_type(data, "--data")  # before anything is written
+    out.mkdir(parents=True, exist_ok=True)
     _write(config_path, run_cfg)
 
-    split_dir = out / "split"
     if not (split_dir / "split.json").is_file():
         write_split(data, split_dir, fractions, seed, force=True)  # no split.json: unfinished
     split = json.loads((split_dir / "split.json").read_text())
@@ -238,6 +245,7 @@ def run_sim2real(
                                         f"the MuJoCo baselines {given}: scores would not compare")
                 res = rollout_metrics(sim, test, horizon=horizon)
                 res["checkpoint"] = str(ckpt)
+                res["recipe"] = run_cfg["recipe"]
                 res["training_trajectories"] = size if size is not None else n_train
                 res["vs_fitted_mujoco"] = paired_ratios(res, fitted)
                 _write(path, res)
@@ -258,6 +266,37 @@ def run_sim2real(
     print(table)
     print(f"wrote {results_path}, {out / 'table.md'}, {out / 'errors_vs_size.png'}")
     return results
+
+
+#: The FIGNet recipe's keys and the options that set them (named when a resume differs).
+_RECIPE_OPTIONS = {"config": "--config", "budget": "--budget", "set": "--set", "init": "--init",
+                   "train_fn": "train_fn"}
+
+
+def _recipe(train_fn: TrainFn | None, config: str, budget: int | None,
+            overrides: dict[str, Any] | None, init: str | None) -> dict[str, Any]:
+    """How every size's FIGNet is trained, as stored in ``run.json`` (JSON-normalised)."""
+    if train_fn is not None:  # a caller's own training step: all that can be recorded is its name
+        return {"train_fn": f"{train_fn.__module__}.{train_fn.__qualname__}"}
+    recipe = {"config": config, "budget": budget, "set": overrides or {}, "init": init}
+    return json.loads(json.dumps(recipe, default=float))
+
+
+def _check_recipe(config_path: Path, stored: dict[str, Any] | None,
+                  asked: dict[str, Any] | None) -> dict[str, Any] | None:
+    """The recipe to record; :class:`Sim2RealError` if it differs from the one the run's sizes
+    were trained with (one table would compare models trained differently). A run that has
+    none yet (``--no-fignet`` so far, or from before recipes were recorded) takes the new one."""
+    if asked is None or stored is None:
+        return stored if asked is None else asked
+    keys = sorted(set(stored) | set(asked), key=list(_RECIPE_OPTIONS).index)
+    diffs = [f"{_RECIPE_OPTIONS[k]} {stored.get(k)!r} (now {asked.get(k)!r})" for k in keys
+             if stored.get(k) != asked.get(k)]
+    if diffs:
+        raise Sim2RealError(f"{config_path}: this run's FIGNet sizes are trained with "
+                            f"{', '.join(diffs)}: resume it with the same recipe, or use another "
+                            "--out for another recipe")
+    return stored
 
 
 def _pretrain(train: list, valid: list, valid_file: Path, out: Path, num: int, *, config: str,
