@@ -181,7 +181,8 @@ class TossProblem(PlanningProblem):
         released = env.task.release(state[None], k, float(env.release_yaws[k]), actions[:, 0])
         # Only the settled state counts (a learned model still steps every 0.02 s).
         return dynamics.rollout(
-            self.model, released, None, nstep=env.settle_steps, frame_skip=self.frame_skip
+            self.model, released, None, nstep=env.settle_steps * self.frame_skip,
+            frame_skip=self.frame_skip,
         )[:, -1:]
 
     def costs(

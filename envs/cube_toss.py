@@ -12,7 +12,7 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from fignet_gym.dynamics import Dynamics
+from fignet_gym.dynamics import Dynamics, compile_with_history
 from fignet_gym.envs.base import MjDynamicsEnv, add_disc, free_camera, layout, layout_size
 from fignet_gym.envs.vector import SingleEnvVectorEnv
 from fignet_gym.mjcf import cube_scene_xml, restitution_to_dampratio
@@ -255,7 +255,7 @@ class CubeTossEnv(MjDynamicsEnv):
         # The learned model sees the scene it was trained on (its props are input features);
         # only MuJoCo gets the fitted contact parameters.
         self.mujoco_params = mujoco_parameters(mujoco_params if dynamics == "mujoco" else "nominal")
-        model = mujoco.MjModel.from_xml_string(cube_toss_xml(self.mujoco_params))
+        model = compile_with_history(cube_toss_xml(self.mujoco_params))
         per_step = round(DATA_DT / model.opt.timestep)
         self.observation_layout = cube_toss_layout()
         self.action_space = spaces.Box(-1.0, 1.0, (6,), np.float32)

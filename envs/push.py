@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from fignet_gym.dynamics import Dynamics
+from fignet_gym.dynamics import Dynamics, compile_with_history
 from fignet_gym.envs.base import (
     MjDynamicsEnv,
     check_arguments,
@@ -184,7 +184,7 @@ class PushEnv(MjDynamicsEnv):
             max_lift=(max_lift, "positive"), min_upright=(min_upright, "finite"),
             width=(width, "count"), height=(height, "count"))
         obj = push_object(shape)
-        model = mujoco.MjModel.from_xml_string(
+        model = compile_with_history(
             push_scene_xml(shape, friction=friction, tip_friction=tip_friction)
         )
         self.shape = shape

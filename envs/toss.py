@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from fignet_gym.dynamics import STATE_SPEC, Dynamics
+from fignet_gym.dynamics import STATE_SPEC, Dynamics, compile_with_history
 from fignet_gym.envs.base import MjDynamicsEnv, add_disc, check_arguments, free_camera, layout, layout_size
 from fignet_gym.envs.tasks import TossTask
 from fignet_gym.envs.vector import SingleEnvVectorEnv
@@ -190,7 +190,7 @@ class TossEnv(MjDynamicsEnv):
         self._park = np.array(
             [[PARK_X, y, z, 1, 0, 0, 0] for y, z in zip(park_y, rest_z, strict=True)]
         )
-        model = mujoco.MjModel.from_xml_string(
+        model = compile_with_history(
             toss_scene_xml(self.objects, floor_half_size=floor_half_size, poses=self._park)
         )
         self.task = TossTask(
