@@ -91,6 +91,15 @@ def free_qvel(model: mujoco.MjModel, qvel: np.ndarray) -> np.ndarray:
     return np.asarray(qvel)[..., da[:, None] + np.arange(6)]
 
 
+def normalized_qpos(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
+    """A copy of ``qpos float[..., nq]`` with its quaternions normalised as ``mj_step`` does (a
+    zero one becomes the identity): the pose a step starts from."""
+    out = np.array(qpos, dtype=np.float64)
+    for row in out.reshape(-1, model.nq):
+        mujoco.mj_normalizeQuat(model, row)
+    return out
+
+
 def unpack(model: mujoco.MjModel, userdata: np.ndarray
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``float64[..., nuserdata]`` -> time ``float[...]``, interval ``float[...]``, counts

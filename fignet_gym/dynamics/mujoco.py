@@ -15,7 +15,13 @@ from fignet_gym.dynamics.base import (
     split_state,
     userdata_slice,
 )
-from fignet_gym.dynamics.history import has_history, num_tracked, record, tracked_poses
+from fignet_gym.dynamics.history import (
+    has_history,
+    normalized_qpos,
+    num_tracked,
+    record,
+    tracked_poses,
+)
 
 _WARNINGS = (
     mujoco.mjtWarning.mjWARN_BADQACC,
@@ -58,7 +64,7 @@ class MujocoDynamics(DynamicsBase):
             raise ValueError(f"nstep must be >= 1, got {nstep}")
         t0, before = data.time, None
         if has_history(model):
-            before = tracked_poses(model, data.qpos, start)
+            before = tracked_poses(model, normalized_qpos(model, data.qpos), start)
             user, vel0 = data.userdata.copy(), data.qvel.copy()
         if nstep == 1 or np.array_equal(start, target):
             mujoco.mj_step(model, data, nstep)
@@ -119,7 +125,8 @@ class MujocoDynamics(DynamicsBase):
         user = np.repeat(state[:, None, userdata_slice(model)], T, axis=1)
         if has_history(model):
             n = num_tracked(model)
-            before = tracked_poses(model, phys[:, 1:], start).reshape(B, n, 7)
+            before = tracked_poses(model, normalized_qpos(model, phys[:, 1 : 1 + model.nq]),
+                                   start).reshape(B, n, 7)
             after = tracked_poses(model, out[..., 1:], control).reshape(B, T, n, 7)
             hist = record(model, state[:, userdata_slice(model)], before, after, phys[:, 0],
                           out[..., 0], frame_skip * float(model.opt.timestep),
