@@ -467,13 +467,15 @@ class FIGNetDynamics(DynamicsBase):
         if B == 0 or nstep == 0:
             return np.zeros((B, nstep, nstate))
         scratch = mujoco.MjData(model)
-        hists, times = [], []
-        for b in range(B):
-            mujoco.mj_setState(model, scratch, state[b], STATE_SPEC)
+        # A planner's candidates share one start state: its history is built once.
+        uniq, inverse = np.unique(state, axis=0, return_inverse=True)
+        hists = []
+        for row in uniq:
+            mujoco.mj_setState(model, scratch, row, STATE_SPEC)
             scratch.xquat[:] = 0.0  # mocap bodies start at the state's mocap_pos / mocap_quat
             hists.append(self._history(model, info, scratch, warn=False))
-            times.append(float(scratch.time))
-        hist = torch.cat(hists, dim=1)
+        hist = torch.cat([hists[i] for i in inverse.ravel()], dim=1)
+        times = [float(t) for t in state[:, 0]]
         out = np.full((B, nstep, nstate), np.nan)
         dead: set[int] = set()
         qa = info.qadr[:, None] + np.arange(7)
