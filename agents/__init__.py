@@ -1,9 +1,10 @@
 """Agents: model-predictive planners and PPO helpers (installed as ``fignet_gym.agents``).
 
 Planners (:mod:`~fignet_gym.agents.planners`) plan any environment that exposes its task (Push,
-Toss, CubeToss, a user's own) by batched rollouts of any :class:`~fignet_gym.dynamics.Dynamics`; the PPO helpers (:mod:`~fignet_gym.agents.ppo`) train
-stable-baselines3 PPO on either dynamics and check a policy on another; :mod:`~fignet_gym.agents.ppo_run`
-is ``fignet-gym ppo`` (resumable run folders, evaluation on both dynamics, the transfer table).
+Toss, CubeToss, a user's own) by batched rollouts of any :class:`~fignet_gym.dynamics.Dynamics`;
+the PPO helpers (:mod:`~fignet_gym.agents.ppo`) train stable-baselines3 PPO on either dynamics
+and check a policy on another; :mod:`~fignet_gym.agents.ppo_run` is ``fignet-gym ppo``
+(resumable run folders, evaluation on both dynamics, the transfer table).
 """
 
 from fignet_gym.agents.baselines import IdleAgent, RandomAgent

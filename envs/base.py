@@ -16,8 +16,8 @@ environments in one batched call:
 from __future__ import annotations
 
 import copy
-from collections.abc import Sequence
 import warnings
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym

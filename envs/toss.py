@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 import warnings
+from collections.abc import Sequence
 from typing import Any
 
 import mujoco
@@ -41,7 +41,8 @@ class TossEnv(MjDynamicsEnv):
     Each step releases the next object from a fixed point (``release_position``, a random heading
     drawn at reset) with the horizontal velocity chosen by the action, then lets the scene evolve
     for ``settle_steps`` learned steps (``settle_steps * settle_frame_skip`` MuJoCo timesteps:
-    the env's ``frame_skip``, 1.5 s by default) so that it comes to rest, possibly against or on top of the objects already there.
+    the env's ``frame_skip``, 1.5 s by default) so that it comes to rest, possibly against or on
+    top of the objects already there.
     If an object already lies under the release point, the release point rises above it (a chute
     over the pile) so that objects never start interpenetrating. Unreleased objects wait at rest on
     the floor far away (``x = -10`` m). The episode ends after the K-th release.
@@ -120,7 +121,7 @@ class TossEnv(MjDynamicsEnv):
     | width | ``480`` | rendered frame width (px) |
     | height | ``480`` | rendered frame height (px) |
     | dynamics_kwargs | ``None`` | extra dynamics arguments (e.g. fignet's ``max_distance``) |
-    | frame_skip | ``None`` | deprecated name of ``settle_frame_skip`` (a ``DeprecationWarning``); ``env.frame_skip`` is now the timesteps of a whole step |
+    | frame_skip | ``None`` | deprecated: ``settle_frame_skip`` (``env.frame_skip``: a whole step) |
     """
 
     scene_type = "toss"

@@ -21,8 +21,8 @@ from fignet_gym.dynamics.base import (
     state_offsets,
     userdata_slice,
 )
-from fignet_gym.dynamics.history import compile_with_history
 from fignet_gym.dynamics.factory import DYNAMICS_FACTORIES, make_dynamics
+from fignet_gym.dynamics.history import compile_with_history
 from fignet_gym.dynamics.learned import FIGNetDynamics
 from fignet_gym.dynamics.mujoco import MujocoDynamics
 

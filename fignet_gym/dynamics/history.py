@@ -17,9 +17,10 @@ quaternion in mocap order)::
 ``frames[0]`` holds the poses at ``time``, ``frames[k]`` those ``k * interval`` seconds earlier;
 ``count[j]`` says how many frames of tracked body ``j`` are valid (0: none, after a reset or
 before the first step); ``qvel`` is each free joint's velocity at ``time``, so that an edited
-velocity (a released object) is told from the recorded one. A model compiled without room for it (``model.nuserdata <
-history_size(model)``) still steps: the learned dynamics then re-seeds its history from
-``qpos``/``qvel`` at every call. :func:`compile_with_history` compiles MJCF with the room.
+velocity (a released object) is told from the recorded one. A model compiled without room
+for it (``model.nuserdata < history_size(model)``) still steps: the learned dynamics then
+re-seeds its history from ``qpos``/``qvel`` at every call. :func:`compile_with_history`
+compiles MJCF with the room.
 """
 
 from __future__ import annotations

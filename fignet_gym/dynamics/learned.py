@@ -23,10 +23,16 @@ from fignet_gym.dynamics.base import (
     normalize_mocap_quat,
     set_mocap,
 )
+from fignet_gym.dynamics.learned_ops import (  # noqa: F401  (CHUNK_NODES: re-exported)
+    CHUNK_NODES,
+    _blend,
+    _integrate_back,
+    batched_step,
+    describe_divergence,
+)
 from fignet_gym.pretrained import load_checkpoint
 from fignet_gym.simulator.geometry import (
     ShapeMatchError,
-    axis_angle_to_quat,
     quat_conj,
     quat_mul,
     quat_normalize,
@@ -52,42 +58,6 @@ class _SceneInfo:
     kin_track: np.ndarray  # int[K]
 
 
-#: Nodes per learned step at most: larger batches are stepped in chunks of whole scenes. Per-scene
-#: cost is lowest around 8k to 17k nodes (docs/experiments.md, issue 17); beyond, every latent
-#: outgrows the caches and each new tensor is fresh memory to fault in.
-CHUNK_NODES = 16384
-
-
-def batched_step(sim: LearnedSimulator, scene: Scene, count: int, hist: Tensor, target: Tensor
-                 ) -> Tensor:
-    """One learned step of ``count`` copies of ``scene``, in chunks of at most
-    :data:`CHUNK_NODES` nodes (the scenes are disjoint, and a scene's result does not depend on
-    its batch, so chunking changes no bit).
-
-    ``hist float[H, count*O, 7]``, ``target float[count*O, 7]`` -> ``float[count*O, 7]``.
-    """
-    chunks = -(-count * scene.num_nodes // CHUNK_NODES)
-    if chunks <= 1:
-        return sim.step(scene.repeat(count), hist, target)
-    n_obj, out, start = scene.num_objects, [], 0
-    for i in range(chunks):
-        c = count // chunks + (i < count % chunks)  # sizes differ by at most one
-        rows = slice(start * n_obj, (start + c) * n_obj)
-        out.append(sim.step(scene.repeat(c), hist[:, rows], target[rows]))
-        start += c
-    return torch.cat(out)
-
-
-def _integrate_back(poses: Tensor, lin: Tensor, ang_body: Tensor, k: int, dt: float) -> Tensor:
-    """Poses ``k * dt`` earlier at constant velocity.
-
-    ``poses float[D, 7]``, ``lin float[D, 3]`` (world), ``ang_body float[D, 3]`` -> ``float[D, 7]``.
-    """
-    p = poses[:, :3] - (k * dt) * lin
-    q = quat_normalize(quat_mul(poses[:, 3:], axis_angle_to_quat(-(k * dt) * ang_body)))
-    return torch.cat((p, q), dim=-1)
-
-
 #: Network precisions of :class:`FIGNetDynamics`.
 PRECISIONS = {"float32": torch.float32, "bfloat16": torch.bfloat16}
 
@@ -110,7 +80,9 @@ class FIGNetDynamics(DynamicsBase):
     After the step, ``qpos`` holds the predicted poses (unit quaternions), ``qvel`` the finite
     difference of the last two (linear world / ``dt``; angular in the body frame, the axis-angle of
     ``q_prev^-1 q_next`` / ``dt``), ``time`` advances by ``nstep * timestep``, then ``mj_forward``.
-    When ``nstep`` spans several learned steps the mocap targets are held for all of them.
+    When ``nstep`` spans several learned steps the mocap bodies move linearly from their current
+    poses to their targets over them (quaternions: normalised linear blends), as
+    :class:`~fignet_gym.dynamics.mujoco.MujocoDynamics` moves them over its timesteps.
 
     Divergence (:class:`DivergenceError`): non-finite poses, a dynamic object farther than
     ``max_distance`` from the world origin, lower than ``fall_depth`` below the lowest static node,
@@ -337,9 +309,12 @@ class FIGNetDynamics(DynamicsBase):
             target = torch.where(
                 per_obj[:, None] & ~torch.isfinite(target), static_poses, target
             )
+        kin = (info.scene.object_kind == ObjectKind.KINEMATIC).repeat(B)
+        start = hist[-1]
         for k in range(nlearn):
+            step_target = target if k == nlearn - 1 else _blend(start, target, kin, (k + 1) / nlearn)
             try:
-                nxt = batched_step(self.simulator, info.scene, B, hist, target)
+                nxt = batched_step(self.simulator, info.scene, B, hist, step_target)
             except (ShapeMatchError, torch.linalg.LinAlgError) as err:
                 reason = f"learned step failed at t={t0[0] + (k + 1) * self.dt:.3f}s: {err}"
                 return hist, {b: bad.get(b, reason) for b in range(B) if b not in dead}
@@ -347,9 +322,10 @@ class FIGNetDynamics(DynamicsBase):
             if bool(sick.any()):
                 for b in torch.nonzero(sick.view(B, n_obj).any(1)).flatten().tolist():
                     if b not in bad and not bool(frozen[b]):
-                        bad[b] = self._describe(
-                            nxt, hist[-1], b, n_obj, info, t0[b] + (k + 1) * self.dt
-                        )
+                        bad[b] = describe_divergence(
+                            nxt[b * n_obj : (b + 1) * n_obj], hist[-1][b * n_obj : (b + 1) * n_obj],
+                            info.dyn, info.scene.object_names, info.floor_z,
+                            t0[b] + (k + 1) * self.dt, self)
                         frozen[b] = True
             if bool(frozen.any()):
                 nxt = torch.where(frozen.repeat_interleave(n_obj)[:, None], hist[-1], nxt)
@@ -364,32 +340,6 @@ class FIGNetDynamics(DynamicsBase):
         bad |= p[:, 2] < floor_z - self.fall_depth
         bad |= (p - cur[:, :3]).norm(dim=-1) > self.max_speed * self.dt
         return bad & dyn
-
-    def _describe(
-        self, nxt: Tensor, cur: Tensor, b: int, n_obj: int, info: _SceneInfo, t: float
-    ) -> str:
-        """Human-readable reason for the first sick dynamic object of scene ``b``."""
-        for o in info.dyn:
-            p, c = nxt[b * n_obj + o], cur[b * n_obj + o]
-            name = info.scene.object_names[o]
-            if not bool(torch.isfinite(p).all()):
-                return f"learned dynamics diverged: object '{name}' is non-finite at t={t:.3f}s"
-            pos = p[:3].tolist()
-            where = f"object '{name}' at ({pos[0]:.3g}, {pos[1]:.3g}, {pos[2]:.3g}) m at t={t:.3f}s"
-            if float(p[:3].norm()) > self.max_distance:
-                limit = f"max_distance={self.max_distance:g} m"
-                return f"learned dynamics diverged: {where} is beyond {limit}"
-            if float(p[2]) < info.floor_z - self.fall_depth:
-                return (
-                    f"learned dynamics diverged: {where} fell {self.fall_depth:g} m below the floor"
-                )
-            speed = float((p[:3] - c[:3]).norm()) / self.dt
-            if speed > self.max_speed:
-                return (
-                    f"learned dynamics diverged: {where} moves at {speed:.3g} m/s "
-                    f"(max_speed={self.max_speed:g})"
-                )
-        return "learned dynamics diverged"
 
     def _pose_velocity(
         self, info: _SceneInfo, hist: Tensor, B: int
