@@ -449,9 +449,11 @@ def planner_config(planner: str, scene_type: str, **overrides: Any) -> CEMConfig
 
 
 def make_planner(
-    planner: str, dynamics: Dynamics, scene_type: str, env: gym.Env | None = None, **overrides: Any
+    planner: str, dynamics: Dynamics, scene_type: str, env: gym.Env | None = None,
+    model: mujoco.MjModel | None = None, **overrides: Any
 ) -> SamplingPlanner:
-    """A :class:`CEMPlanner` or :class:`MPPIPlanner` with :func:`planner_config`'s settings."""
+    """A :class:`CEMPlanner` or :class:`MPPIPlanner` with :func:`planner_config`'s settings
+    (``model``: the planning model, default the env's; see :class:`SamplingPlanner`)."""
     config = planner_config(planner, scene_type, **overrides)
     cls = CEMPlanner if planner == "cem" else MPPIPlanner
-    return cls(dynamics, config, env=env)
+    return cls(dynamics, config, env=env, model=model)

@@ -217,8 +217,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 dyn = MujocoDynamics(nthread=args.threads)
             else:
                 dyn = make_dynamics("fignet", args.checkpoint, scene)
+            # An env whose scene depends on its dynamics (CubeToss: fitted MuJoCo parameters,
+            # the learned model's own nominal scene) plans on the planning dynamics' scene.
+            plan_model = None
+            if args.dynamics != args.act_dynamics:
+                own = gym.make(args.env, dynamics="mujoco" if args.dynamics == "mujoco" else dyn)
+                plan_model = own.unwrapped.model
             agent = make_planner(
-                args.planner, dyn, scene, env=env, horizon=args.horizon,
+                args.planner, dyn, scene, env=env, model=plan_model, horizon=args.horizon,
                 population=args.population, iterations=args.iterations,
                 replan_every=args.replan_every, **({"seed": args.seed} if args.seed else {}),
             )
