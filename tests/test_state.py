@@ -200,9 +200,12 @@ def test_empty_batch_and_zero_steps_give_empty_arrays(backend: str) -> None:
     mujoco.mj_getState(model, d, state, STATE_SPEC)
     out = dyn.rollout(model, np.stack([state, state]), np.zeros((2, 0, 7)), frame_skip=10)
     assert out.shape == (2, 0, nstate)
-    with pytest.raises(ValueError, match="multiple of frame_skip"):
-        dyn.rollout(model, state, None if model.nmocap == 0 else np.zeros((1, 1, 7)), nstep=5,
-                    frame_skip=10)
+    # nstep counts timesteps; the former meaning (recorded states) where it cannot be the new
+    # one is still read, with a DeprecationWarning
+    control = np.concatenate((d.mocap_pos[0], d.mocap_quat[0]))[None, None].repeat(3, 1)
+    with pytest.warns(DeprecationWarning, match="nstep=30"):
+        old = dyn.rollout(model, state, control, nstep=3, frame_skip=10)
+    np.testing.assert_array_equal(old, dyn.rollout(model, state, control, nstep=30, frame_skip=10))
 
 
 @pytest.mark.parametrize("backend", ["mujoco", "fignet"])

@@ -28,6 +28,7 @@ the protocol and the helpers every implementation shares; it imports no implemen
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from typing import Protocol, runtime_checkable
 
@@ -132,12 +133,17 @@ def check_rollout_inputs(
     if nstep is not None:
         if isinstance(nstep, bool) or not isinstance(nstep, (int, np.integer)) or nstep < 0:
             raise ValueError(f"nstep must be an integer >= 0 (MuJoCo timesteps), got {nstep!r}")
-        if nstep % frame_skip:
-            raise ValueError(
-                f"nstep counts MuJoCo timesteps, as in mujoco.rollout: {nstep} is not a multiple "
-                f"of frame_skip={frame_skip} (for T recorded states pass nstep=T * frame_skip)"
-            )
-        nstep = nstep // frame_skip
+        rows = None if control is None else np.shape(control)[-2]
+        # The former meaning (recorded states) where it cannot be the new one: nstep not a
+        # multiple of frame_skip, or as many control rows as nstep.
+        if frame_skip > 1 and (nstep % frame_skip or rows == nstep):
+            warnings.warn(
+                f"Dynamics.rollout: nstep counts MuJoCo timesteps (as in mujoco.rollout); "
+                f"nstep={nstep} with frame_skip={frame_skip} is read as {nstep} recorded states, "
+                f"the former meaning: pass nstep={nstep * frame_skip}", DeprecationWarning,
+                stacklevel=3)
+        else:
+            nstep = nstep // frame_skip
     nstate = mujoco.mj_stateSize(model, STATE_SPEC)
     ncontrol = mujoco.mj_stateSize(model, CONTROL_SPEC)
     state = np.asarray(initial_state, dtype=np.float64)
