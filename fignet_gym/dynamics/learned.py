@@ -481,3 +481,9 @@ class FIGNetDynamics(DynamicsBase):
         tgt = torch.as_tensor(np.concatenate((pos, quat), -1), dtype=torch.float32, device=device)
         tgt = tgt.transpose(0, 1).reshape(pos.shape[1], -1, 7)
         return torch.cat((tgt[..., :3], quat_normalize(tgt[..., 3:])), -1)
+
+    def forget(self, data: mujoco.MjData) -> None:
+        """Drop the pose history of ``data`` (its ``userdata`` frames): the next step reseeds it
+        from ``qpos``/``qvel``. ``mj_resetData`` does the same."""
+        if history.has_history(data.model):
+            data.userdata[: history.history_size(data.model)] = 0.0
