@@ -374,7 +374,8 @@ class TossTask(Task):
             raise RuntimeError("every object was tossed: reset the environment")
         start = self.release(state[None], k, float(context["release_yaw"]), actions[:, 0])
         skip = int(context["frame_skip"])
-        return dynamics.rollout(model, start, None, nstep=skip, frame_skip=skip)
+        return dynamics.rollout(model, start, np.zeros((len(start), 1, 0)), nstep=skip,
+                                frame_skip=skip)
 
     def plan_cost(self, state: np.ndarray, states: np.ndarray, actions: np.ndarray,
                   shaping: float = 0.0, terminal: float = 0.0, **context: object) -> np.ndarray:
@@ -475,7 +476,8 @@ class CubeTossTask(Task):
         env's ``frame_skip`` timesteps; the resting state (``T' = 1``)."""
         skip = int(context["frame_skip"])
         start = self.release(state[None], actions[:, 0])
-        return dynamics.rollout(model, start, None, nstep=skip, frame_skip=skip)
+        return dynamics.rollout(model, start, np.zeros((len(start), 1, 0)), nstep=skip,
+                                frame_skip=skip)
 
     def plan_cost(self, state: np.ndarray, states: np.ndarray, actions: np.ndarray,
                   shaping: float = 0.0, terminal: float = 0.0, **context: object) -> np.ndarray:

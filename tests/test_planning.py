@@ -34,6 +34,12 @@ TINY_CEM = CEMConfig(horizon=3, population=6, elites=2, iterations=2, seed=0)
 TINY_MPPI = MPPIConfig(horizon=3, population=6, iterations=2, seed=0)
 
 
+def _rows(nstep: int, frame_skip: int) -> np.ndarray:
+    """Control rows of a model without mocap bodies (``float[1, T, 0]``): with them ``nstep``
+    counts MuJoCo timesteps (without, it keeps its former meaning for a deprecation period)."""
+    return np.zeros((1, nstep // frame_skip, 0))
+
+
 def running_push(env_id: str, steps: int = 6, **kwargs: Any) -> gym.Env:
     """A push env a few random steps into an episode (the tip has moved, the object may too)."""
     env = gym.make(env_id, **kwargs)
@@ -76,8 +82,9 @@ def test_mujoco_rollout_from_a_running_toss_env_equals_stepping_it() -> None:
     released = u.task.release(u.get_state(), u.released, float(u.release_yaws[u.released]), action)
     dyn = MujocoDynamics(nthread=1)
     nstep = u.frame_skip
-    out = dyn.rollout(u.model, released[None], None, nstep=nstep, frame_skip=u.settle_frame_skip)
-    whole = dyn.rollout(u.model, released[None], None, nstep=nstep, frame_skip=nstep)
+    skip = u.settle_frame_skip
+    out = dyn.rollout(u.model, released[None], _rows(nstep, skip), nstep=nstep, frame_skip=skip)
+    whole = dyn.rollout(u.model, released[None], _rows(nstep, nstep), nstep=nstep, frame_skip=nstep)
     env.step(action)
     np.testing.assert_allclose(whole[0, -1], u.get_state(), rtol=0, atol=1e-9)
     # recorded every learned step, the pose history in userdata has finer frames than one step
@@ -117,7 +124,8 @@ def test_learned_rollout_from_a_running_env_equals_its_own_single_steps(kind: st
         env = running_toss(dynamics=dyn)
         u = env.unwrapped
         state = u.task.release(u.get_state(), u.released, 0.3, np.zeros(2))
-        control, frame_skip, nstep = None, u.settle_frame_skip, 4 * u.settle_frame_skip
+        frame_skip, nstep = u.settle_frame_skip, 4 * u.settle_frame_skip
+        control = _rows(nstep, frame_skip)
     out = dyn.rollout(u.model, state[None], control, nstep=nstep, frame_skip=frame_skip)
     ctrl = control[0] if control is not None else np.zeros((4, 0))
     ref = rollout_loop(dyn, u.model, mujoco.MjData(u.model), state, ctrl, frame_skip)

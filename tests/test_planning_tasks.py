@@ -33,6 +33,12 @@ BALL_XML = """<mujoco><option gravity="0 0 0" timestep="0.01"/><worldbody>
 KICK = 3.0
 
 
+def _rows(nstep: int, frame_skip: int) -> np.ndarray:
+    """Control rows of a model without mocap bodies (``float[1, T, 0]``): with them ``nstep``
+    counts MuJoCo timesteps (without, it keeps its former meaning for a deprecation period)."""
+    return np.zeros((1, nstep // frame_skip, 0))
+
+
 class KickTask(Task):
     """Kick the ball along x (m/s) so that it ends at ``target`` after one step."""
 
@@ -49,8 +55,8 @@ class KickTask(Task):
     def plan_rollout(self, dynamics: Dynamics, model: mujoco.MjModel, state: np.ndarray,
                      actions: np.ndarray, **context: Any) -> np.ndarray:
         skip = int(context["frame_skip"])
-        return dynamics.rollout(model, self.kick(state[None], actions[:, 0]), None, nstep=skip,
-                                frame_skip=skip)
+        return dynamics.rollout(model, self.kick(state[None], actions[:, 0]), _rows(skip, skip),
+                                nstep=skip, frame_skip=skip)
 
     def plan_cost(self, state: np.ndarray, states: np.ndarray, actions: np.ndarray,
                   shaping: float = 0.0, terminal: float = 0.0, **context: Any) -> np.ndarray:

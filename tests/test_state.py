@@ -29,6 +29,12 @@ LEARNED_ATOL = 1e-5
 TOSS_FAST = {"settle_steps": 6}
 
 
+def _rows(nstep: int, frame_skip: int) -> np.ndarray:
+    """Control rows of a model without mocap bodies (``float[1, T, 0]``): with them ``nstep``
+    counts MuJoCo timesteps (without, it keeps its former meaning for a deprecation period)."""
+    return np.zeros((1, nstep // frame_skip, 0))
+
+
 def _noisy_push(env: gym.Env, steps: int, seed: int) -> np.ndarray:
     """Drive the tip into the object with noise for ``steps`` steps; the next action ``float[2]``."""
     u = env.unwrapped
@@ -94,10 +100,11 @@ def test_toss_rollout_continues_from_a_mid_toss_state() -> None:
     released = u.task.release(u.get_state(), u.released, float(u.release_yaws[u.released]),
                               np.array([0.5, 0.1]))
     skip = u.settle_frame_skip
-    whole = dyn.rollout(u.model, released, None, nstep=u.settle_steps * skip, frame_skip=skip)[0]
+    n = u.settle_steps * skip
+    whole = dyn.rollout(u.model, released, _rows(n, skip), nstep=n, frame_skip=skip)[0]
     half = u.settle_steps // 2
-    rest = dyn.rollout(u.model, whole[half - 1], None, nstep=(u.settle_steps - half) * skip,
-                       frame_skip=skip)[0]
+    n = (u.settle_steps - half) * skip
+    rest = dyn.rollout(u.model, whole[half - 1], _rows(n, skip), nstep=n, frame_skip=skip)[0]
     np.testing.assert_allclose(rest, whole[half:], rtol=0, atol=LEARNED_ATOL)
     # and the env's own step from the released state ends where the rollout does
     u.set_state(released)
@@ -116,8 +123,8 @@ def test_toss_vector_env_rows_roll_out_as_they_step() -> None:
     act = np.array([[0.1, 0.2], [0.7, -0.3]])
     released = np.stack([e.task.release(e.get_state(), e.released, float(e.release_yaws[e.released]),
                                         a) for e, a in zip(envs, act, strict=True)])
-    pred = dyn.rollout(envs[0].model, released, None, nstep=envs[0].frame_skip,
-                       frame_skip=envs[0].frame_skip)
+    n = envs[0].frame_skip
+    pred = dyn.rollout(envs[0].model, released, _rows(n, n), nstep=n, frame_skip=n)
     venv.step(act)
     for i, e in enumerate(envs):
         np.testing.assert_allclose(pred[i, -1], e.get_state(), rtol=0, atol=LEARNED_ATOL)
@@ -146,12 +153,13 @@ def test_cube_toss_rollout_is_the_env_step_and_continues_mid_toss(vector: bool) 
         e.tossed = False
     released = np.stack(released)
     skip = u.settle_frame_skip
-    pred = u.dynamics.rollout(u.model, released, None, nstep=u.frame_skip, frame_skip=skip)
+    n = u.frame_skip
+    pred = u.dynamics.rollout(u.model, released, _rows(n, skip), nstep=n, frame_skip=skip)
     env.step(acts if vector else acts[0])
     for i, e in enumerate(envs):
         np.testing.assert_allclose(pred[i, -1], e.get_state(), rtol=0, atol=LEARNED_ATOL)
     half = pred.shape[1] // 2
-    rest = u.dynamics.rollout(u.model, pred[:, half - 1], None,
+    rest = u.dynamics.rollout(u.model, pred[:, half - 1], _rows((pred.shape[1] - half) * skip, skip),
                               nstep=(pred.shape[1] - half) * skip, frame_skip=skip)
     np.testing.assert_allclose(rest, pred[:, half:], rtol=0, atol=LEARNED_ATOL)
     env.close()

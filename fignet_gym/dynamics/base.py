@@ -134,13 +134,16 @@ def check_rollout_inputs(
         if isinstance(nstep, bool) or not isinstance(nstep, (int, np.integer)) or nstep < 0:
             raise ValueError(f"nstep must be an integer >= 0 (MuJoCo timesteps), got {nstep!r}")
         rows = None if control is None else np.shape(control)[-2]
-        # The former meaning (recorded states) where it cannot be the new one: nstep not a
-        # multiple of frame_skip, or as many control rows as nstep.
-        if frame_skip > 1 and (nstep % frame_skip or rows == nstep):
+        # The former meaning (recorded states) where it cannot be the new one (nstep not a
+        # multiple of frame_skip, or as many control rows as nstep) and, for a deprecation
+        # period, where nothing tells them apart (no control rows): give control rows, float[B,
+        # T, 0] without mocap bodies, to count timesteps there.
+        if frame_skip > 1 and (nstep % frame_skip or rows == nstep or rows is None):
             warnings.warn(
                 f"Dynamics.rollout: nstep counts MuJoCo timesteps (as in mujoco.rollout); "
                 f"nstep={nstep} with frame_skip={frame_skip} is read as {nstep} recorded states, "
-                f"the former meaning: pass nstep={nstep * frame_skip}", DeprecationWarning,
+                f"the former meaning: pass nstep={nstep * frame_skip} with control rows (float[B, "
+                f"{nstep}, 0] without mocap bodies)", DeprecationWarning,
                 stacklevel=3)
         else:
             nstep = nstep // frame_skip
