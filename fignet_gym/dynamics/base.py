@@ -108,7 +108,10 @@ class Dynamics(Protocol):
         one state recorded every ``frame_skip`` timesteps: ``float64[B, nstate]`` states and
         ``float64[B, T, nmocap * 7]`` mocap targets (each reached over ``frame_skip`` timesteps)
         -> ``float64[B, T, nstate]``, ``T = nstep // frame_skip`` (default ``nstep``: ``T``
-        control rows). An empty batch or ``nstep = 0`` gives an empty array of that shape."""
+        control rows). An empty batch or ``nstep = 0`` gives an empty array of that shape.
+        Deprecated: ``nstep`` as the number of recorded states, still read (with a warning)
+        where it cannot count timesteps, and without control rows when ``frame_skip > 1`` (give
+        ``float[B, T, 0]`` controls to a model without mocap bodies)."""
         ...
 
     def validate(self, model: mujoco.MjModel, nstep: int, scene_type: str = "") -> None:

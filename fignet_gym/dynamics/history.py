@@ -25,6 +25,8 @@ compiles MJCF with the room.
 
 from __future__ import annotations
 
+import weakref
+
 import mujoco
 import numpy as np
 
@@ -39,21 +41,36 @@ HEADER = 2
 SAME_POSE = 1e-6
 
 
+#: Per model: free joints' qpos and qvel addresses (read-only ``int[nfree]``), computed once
+#: (a MuJoCo env step records the history: it must stay cheap next to ``mj_step``).
+_ADDRESSES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _addresses(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
+    out = _ADDRESSES.get(model)
+    if out is None:
+        free = np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_FREE)
+        out = (model.jnt_qposadr[free].astype(np.int64), model.jnt_dofadr[free].astype(np.int64))
+        for a in out:
+            a.flags.writeable = False
+        _ADDRESSES[model] = out
+    return out
+
+
 def free_qpos_addresses(model: mujoco.MjModel) -> np.ndarray:
     """``int[nfree]``: ``qpos`` address of every free joint, in joint order."""
-    free = np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_FREE)
-    return model.jnt_qposadr[free].astype(np.int64)
+    return _addresses(model)[0]
 
 
 def num_tracked(model: mujoco.MjModel) -> int:
     """Tracked bodies: free joints, then mocap bodies."""
-    return len(free_qpos_addresses(model)) + model.nmocap
+    return len(_addresses(model)[0]) + model.nmocap
 
 
 def history_size(model: mujoco.MjModel) -> int:
     """``userdata`` entries the history of ``model`` needs."""
     n = num_tracked(model)
-    return HEADER + n + 6 * len(free_qpos_addresses(model)) + FRAMES * 7 * n
+    return HEADER + n + 6 * len(_addresses(model)[0]) + FRAMES * 7 * n
 
 
 def has_history(model: mujoco.MjModel) -> bool:
@@ -87,8 +104,7 @@ def tracked_poses(model: mujoco.MjModel, qpos: np.ndarray, mocap: np.ndarray) ->
 
 def free_qvel(model: mujoco.MjModel, qvel: np.ndarray) -> np.ndarray:
     """``float[..., nv] -> float[..., nfree, 6]`` the free joints' velocities."""
-    free = np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_FREE)
-    da = model.jnt_dofadr[free].astype(np.int64)
+    da = _addresses(model)[1]
     return np.asarray(qvel)[..., da[:, None] + np.arange(6)]
 
 
@@ -171,4 +187,49 @@ def record(model: mujoco.MjModel, userdata: np.ndarray, before: np.ndarray, afte
         counts = np.minimum(counts + 1, FRAMES)
         vel = free_qvel(model, qvel_after[:, t])
         out[:, t] = pack(model, time_after[:, t], interval, counts, vel, frames)
+    return out
+
+
+def record_step(model: mujoco.MjModel, userdata: np.ndarray, before: np.ndarray,
+                after: np.ndarray, time_before: float, time_after: float, interval: float,
+                qvel_before: np.ndarray, qvel_after: np.ndarray) -> None:
+    """:func:`record` of one step of one ``MjData``, in place in its ``userdata
+    float64[nuserdata]`` (``before``, ``after``: ``float[n, 7]``; ``qvel_*``: ``float[nv]``): the
+    path of every MuJoCo env step, kept to a few array operations."""
+    qa, da = _addresses(model)
+    nf, n = len(qa), len(qa) + model.nmocap
+    v0 = HEADER + n
+    f0 = v0 + 6 * nf
+    frames = userdata[f0 : f0 + FRAMES * 7 * n].reshape(FRAMES, n, 7)
+    dofs = da[:, None] + np.arange(6)
+    counts = np.zeros(n)
+    if userdata[0] == time_before and abs(userdata[1] - interval) <= 1e-9 * max(interval, 1e-12):
+        same = (np.abs(frames[0] - before) <= SAME_POSE).all(-1)
+        vel = userdata[v0:f0].reshape(nf, 6)
+        same[:nf] &= (np.abs(vel - qvel_before[dofs]) <= SAME_POSE).all(-1)
+        counts = np.where(same, np.minimum(userdata[HEADER:v0], FRAMES), 0.0)
+    frames[2:] = frames[1:-1].copy()
+    frames[1] = before
+    frames[0] = after
+    userdata[HEADER:v0] = np.minimum(np.maximum(counts, 1) + 1, FRAMES)
+    userdata[v0:f0] = qvel_after[dofs].ravel()
+    userdata[0], userdata[1] = time_after, interval
+
+
+def current_poses(model: mujoco.MjModel, qpos: np.ndarray, mocap_pos: np.ndarray,
+                  mocap_quat: np.ndarray, normalize: bool = True) -> np.ndarray:
+    """``float64[n, 7]`` tracked poses of one data: free joints from ``qpos float[nq]`` (with
+    ``normalize``, their quaternions normalised as ``mj_step`` normalises them: a zero one is the
+    identity), mocap bodies from ``mocap_pos float[nmocap, 3]``, ``mocap_quat float[nmocap, 4]``."""
+    qa = _addresses(model)[0]
+    nf = len(qa)
+    out = np.empty((nf + model.nmocap, 7))
+    out[:nf] = qpos[qa[:, None] + np.arange(7)]
+    if normalize:
+        q = out[:nf, 3:]
+        norm = np.sqrt((q * q).sum(-1, keepdims=True))
+        unit = q / np.maximum(norm, 1e-300)
+        out[:nf, 3:] = np.where(norm < mujoco.mjMINVAL, (1.0, 0.0, 0.0, 0.0), unit)
+    out[nf:, :3] = mocap_pos
+    out[nf:, 3:] = mocap_quat
     return out

@@ -16,10 +16,12 @@ from fignet_gym.dynamics.base import (
     userdata_slice,
 )
 from fignet_gym.dynamics.history import (
+    current_poses,
     has_history,
     normalized_qpos,
     num_tracked,
     record,
+    record_step,
     tracked_poses,
 )
 
@@ -64,8 +66,8 @@ class MujocoDynamics(DynamicsBase):
             raise ValueError(f"nstep must be >= 1, got {nstep}")
         t0, before = data.time, None
         if has_history(model):
-            before = tracked_poses(model, normalized_qpos(model, data.qpos), start)
-            user, vel0 = data.userdata.copy(), data.qvel.copy()
+            before = current_poses(model, data.qpos, data.xpos[bodies], data.xquat[bodies])
+            vel0 = data.qvel.copy()
         if nstep == 1 or np.array_equal(start, target):
             mujoco.mj_step(model, data, nstep)
         else:
@@ -82,12 +84,10 @@ class MujocoDynamics(DynamicsBase):
                 "(it reset the simulation)"
             )
         if before is not None:
-            now = tracked_poses(model, data.qpos, target)
-            n = len(before) // 7
-            hist = record(model, user[None], before.reshape(1, n, 7), now.reshape(1, 1, n, 7),
-                          np.array([t0]), np.array([[data.time]]), nstep * float(model.opt.timestep),
-                          vel0[None], data.qvel[None, None])
-            data.userdata[: hist.shape[-1]] = hist[0, 0]
+            # mj_step normalised qpos already
+            now = current_poses(model, data.qpos, data.mocap_pos, data.mocap_quat, normalize=False)
+            record_step(model, data.userdata, before, now, t0, data.time,
+                        nstep * float(model.opt.timestep), vel0, data.qvel)
 
     def _rollout(
         self, model: mujoco.MjModel, state: np.ndarray, control: np.ndarray, nstep: int,
