@@ -25,10 +25,10 @@ from fignet_gym.dynamics.base import (
 )
 from fignet_gym.dynamics.learned_ops import (  # noqa: F401  (CHUNK_NODES: re-exported)
     CHUNK_NODES,
-    _blend,
-    _integrate_back,
     batched_step,
+    blend_targets,
     describe_divergence,
+    integrate_back,
 )
 from fignet_gym.pretrained import load_checkpoint
 from fignet_gym.simulator.geometry import (
@@ -207,7 +207,7 @@ class FIGNetDynamics(DynamicsBase):
         cur, lin, ang = self._current(info, data)
         hist = cur[None].repeat(H, 1, 1)
         for k in range(H):
-            hist[H - 1 - k, info.dyn] = _integrate_back(cur[info.dyn], lin, ang, k, self.dt)
+            hist[H - 1 - k, info.dyn] = integrate_back(cur[info.dyn], lin, ang, k, self.dt)
         if not history.has_history(model):
             if warn and model not in self._warned:
                 self._warned.add(model)
@@ -312,7 +312,7 @@ class FIGNetDynamics(DynamicsBase):
         kin = (info.scene.object_kind == ObjectKind.KINEMATIC).repeat(B)
         start = hist[-1]
         for k in range(nlearn):
-            step_target = target if k == nlearn - 1 else _blend(start, target, kin, (k + 1) / nlearn)
+            step_target = target if k == nlearn - 1 else blend_targets(start, target, kin, (k + 1) / nlearn)
             try:
                 nxt = batched_step(self.simulator, info.scene, B, hist, step_target)
             except (ShapeMatchError, torch.linalg.LinAlgError) as err:

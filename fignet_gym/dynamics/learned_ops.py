@@ -41,7 +41,7 @@ def batched_step(sim: LearnedSimulator, scene: Scene, count: int, hist: Tensor, 
     return torch.cat(out)
 
 
-def _integrate_back(poses: Tensor, lin: Tensor, ang_body: Tensor, k: int, dt: float) -> Tensor:
+def integrate_back(poses: Tensor, lin: Tensor, ang_body: Tensor, k: int, dt: float) -> Tensor:
     """Poses ``k * dt`` earlier at constant velocity.
 
     ``poses float[D, 7]``, ``lin float[D, 3]`` (world), ``ang_body float[D, 3]`` -> ``float[D, 7]``.
@@ -51,7 +51,7 @@ def _integrate_back(poses: Tensor, lin: Tensor, ang_body: Tensor, k: int, dt: fl
     return torch.cat((p, q), dim=-1)
 
 
-def _blend(start: Tensor, target: Tensor, rows: Tensor, frac: float) -> Tensor:
+def blend_targets(start: Tensor, target: Tensor, rows: Tensor, frac: float) -> Tensor:
     """``target float[N, 7]`` with ``rows bool[N]`` moved the fraction ``frac`` of the way from
     ``start float[N, 7]`` (positions linearly, quaternions as normalised linear blends: MuJoCo's
     mocap path, :func:`~fignet_gym.dynamics.mujoco.interpolate_mocap`)."""
