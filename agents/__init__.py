@@ -1,12 +1,14 @@
 """Agents: model-predictive planners and PPO helpers (installed as ``fignet_gym.agents``).
 
-Planners (:mod:`~fignet_gym.agents.planners`) plan Push tip motions and Toss releases by batched
-rollouts of any :class:`~fignet_gym.dynamics.Dynamics`; the PPO helpers (:mod:`~fignet_gym.agents.ppo`) train
-stable-baselines3 PPO on either dynamics and check a policy on another; :mod:`~fignet_gym.agents.ppo_run`
-is ``fignet-gym ppo`` (resumable run folders, evaluation on both dynamics, the transfer table).
+Planners (:mod:`~fignet_gym.agents.planners`) plan any environment that exposes its task (Push,
+Toss, CubeToss, a user's own) by batched rollouts of any :class:`~fignet_gym.dynamics.Dynamics`;
+the PPO helpers (:mod:`~fignet_gym.agents.ppo`) train stable-baselines3 PPO on either dynamics
+and check a policy on another; :mod:`~fignet_gym.agents.ppo_run` is ``fignet-gym ppo``
+(resumable run folders, evaluation on both dynamics, the transfer table).
 """
 
 from fignet_gym.agents.baselines import IdleAgent, RandomAgent
+from fignet_gym.agents.episode import run_episode
 from fignet_gym.agents.planners import (
     PRESETS,
     CEMConfig,
@@ -17,7 +19,6 @@ from fignet_gym.agents.planners import (
     SamplingPlanner,
     make_planner,
     planner_config,
-    run_episode,
 )
 from fignet_gym.agents.ppo import (
     EVAL_KEYS,

@@ -1,11 +1,12 @@
-"""Sampling-based model-predictive control (CEM, MPPI) of Push and Toss through any :class:`Dynamics`.
+"""Sampling-based model-predictive control (CEM, MPPI) of any task through any :class:`Dynamics`.
 
 Every call of :meth:`SamplingPlanner.plan` scores ``population`` action sequences of ``horizon``
 steps with **one** ``dynamics.rollout`` call per iteration (all candidates as one batch: one
 batched graph per learned step for FIGNet, ``mujoco.rollout``'s threads for MuJoCo), refits the
 sampling distribution and returns the first action (receding horizon). The next call starts from
-the previous plan shifted by one step (warm start). On Toss-v0 a plan is one release (``horizon``
-is 1) and each candidate's rollout is the whole settle of the scene.
+the previous plan shifted by one step (warm start). Candidates are sampled in ``[-1, 1]^A`` and
+mapped onto the env's ``action_space``. On one-shot tasks (Toss-v0, CubeToss-v0: the task's
+``plan_horizon`` is 1) a plan is one release and each candidate's rollout its whole settle.
 
 The cost of a candidate is minus the environment's own reward over the predicted states (through
 :mod:`~fignet_gym.agents.task`, which calls the env's task functions), plus on Push an optional
@@ -15,7 +16,9 @@ cost per metre). Candidates whose rollout diverged (NaN rows, or a :class:`Diver
 
 Planners follow stable-baselines3's policy interface: ``predict(obs, state, episode_start,
 deterministic) -> (action, state)``, so ``stable_baselines3.common.evaluation.evaluate_policy``
-runs them; they plan from the bound environment's whole state, not from ``obs``.
+runs them; they plan from the bound environment's whole state, not from ``obs``. As in SB3,
+``deterministic=True`` returns the plan's action (the mode) and ``False`` (SB3's default) a draw
+from the planner's final sampling distribution around it.
 
     planner = CEMPlanner(FIGNetDynamics("push"), CEMConfig(horizon=8, population=48))
     stats = run_episode(gym.make("fignet_gym/Push-v1"), planner, seed=0)  # plan learned, act MuJoCo
@@ -193,7 +196,7 @@ class SamplingPlanner:
         self.last: PlanInfo | None = None
         self.prediction: np.ndarray | None = None
         self._horizon = self.config.horizon
-        self._action_dim = 2
+        self._action_dim = 0  # known once bound: the env's action space
         self.reset()
         if env is not None:
             self.bind(env)
@@ -207,12 +210,13 @@ class SamplingPlanner:
         """Forget the plan (new episode) and restart the generator (``seed``: else the config's)."""
         self.rng = np.random.default_rng(self.config.seed if seed is None else seed)
         self.plan_actions = np.zeros((self._horizon, self._action_dim))
+        self.action_std = np.full_like(self.plan_actions, self.config.noise_std)
         self.prediction = None
         self._fresh = True
         self._played = 0  # actions of the current plan already returned
 
     def bind(self, env: gym.Env) -> None:
-        """Plan for ``env`` (Push-v0/v1 or Toss-v0, wrappers allowed) from now on.
+        """Plan for ``env`` (any env exposing its task, wrappers allowed) from now on.
 
         Raises ``ValueError`` if the planning dynamics or model do not fit the env's scene.
         """
@@ -235,7 +239,7 @@ class SamplingPlanner:
                 of the bound environment's model; the goal is the bound environment's.
 
         Returns:
-            ``float32[A]`` action in ``[-1, 1]``, always finite.
+            ``float32[A]`` action in the env's ``action_space``, always finite.
         """
         start, cpu = time.perf_counter(), time.process_time()
         if isinstance(env_or_state, np.ndarray):
@@ -264,7 +268,7 @@ class SamplingPlanner:
             cost, diverged, evaluated = self._optimise(state)
         else:  # play the plan on: no optimisation this step
             cost, diverged, evaluated = self.last.cost if self.last else np.inf, 0, 0
-        action = self.plan_actions[self._played].astype(np.float32)
+        action = self.problem.to_action(self.plan_actions[self._played]).astype(np.float32)
         self._played += 1
         self.last = PlanInfo(
             cost, diverged, evaluated, time.perf_counter() - start, time.process_time() - cpu
@@ -286,7 +290,9 @@ class SamplingPlanner:
                 from the environment's whole state, which the observation only summarises).
             state: passed through (no recurrent state).
             episode_start: ``bool[1]``; true resets the plan (a new episode).
-            deterministic: accepted for the interface; the sampling is seeded either way.
+            deterministic: ``True``: the plan's action; ``False`` (SB3's default): a draw from
+                the planner's last sampling distribution around it (per-dimension ``std``:
+                CEM's refitted one, MPPI's ``noise_std``), clipped to the action space.
 
         Returns:
             ``float32[A]`` or ``float32[1, A]`` (as ``observation``), and ``state``.
@@ -308,6 +314,10 @@ class SamplingPlanner:
                 "(bind the planner to the environment being evaluated)"
             )
         action = self.plan(self.problem.env)
+        if not deterministic:
+            std = self.action_std[min(self._played - 1, len(self.action_std) - 1)]
+            u = self.plan_actions[self._played - 1] + std * self.rng.standard_normal(std.shape)
+            action = self.problem.to_action(u).astype(np.float32)
         return (action[None] if batched else action), state
 
     def _optimise(self, state: np.ndarray) -> tuple[float, int, int]:
@@ -368,6 +378,7 @@ class CEMPlanner(SamplingPlanner):
             elite = actions[order[: cfg.elites]]
             mean, std = elite.mean(0), np.maximum(elite.std(0), cfg.min_std)
         self.plan_actions = best.copy()
+        self.action_std = std
         return best_cost, diverged, cfg.iterations * cfg.population
 
 
@@ -406,6 +417,7 @@ class MPPIPlanner(SamplingPlanner):
             w[ok] = np.exp(-(cost[ok] - lowest) / cfg.temperature)
             mean = np.einsum("b,btk->tk", w / w.sum(), actions)
         self.plan_actions = np.clip(mean, -1.0, 1.0)
+        self.action_std = np.full_like(mean, cfg.noise_std)
         return best_cost, diverged, cfg.iterations * cfg.population
 
 
@@ -419,6 +431,8 @@ PRESETS: dict[str, dict[str, Any]] = {
              "approach_weight": 30.0},
     "toss": {"horizon": 1, "population": 16, "iterations": 3, "noise_std": 1.0,
              "approach_weight": 0.0},
+    "cube-real": {"horizon": 1, "population": 24, "iterations": 3, "noise_std": 0.7,
+                  "approach_weight": 0.0},
 }
 
 
@@ -435,69 +449,11 @@ def planner_config(planner: str, scene_type: str, **overrides: Any) -> CEMConfig
 
 
 def make_planner(
-    planner: str, dynamics: Dynamics, scene_type: str, env: gym.Env | None = None, **overrides: Any
+    planner: str, dynamics: Dynamics, scene_type: str, env: gym.Env | None = None,
+    model: mujoco.MjModel | None = None, **overrides: Any
 ) -> SamplingPlanner:
-    """A :class:`CEMPlanner` or :class:`MPPIPlanner` with :func:`planner_config`'s settings."""
+    """A :class:`CEMPlanner` or :class:`MPPIPlanner` with :func:`planner_config`'s settings
+    (``model``: the planning model, default the env's; see :class:`SamplingPlanner`)."""
     config = planner_config(planner, scene_type, **overrides)
     cls = CEMPlanner if planner == "cem" else MPPIPlanner
-    return cls(dynamics, config, env=env)
-
-
-def run_episode(
-    env: gym.Env,
-    planner: SamplingPlanner,
-    seed: int | None = None,
-    max_steps: int | None = None,
-    on_step: Any = None,
-) -> dict[str, Any]:
-    """One episode acted in ``env`` with ``planner`` replanning every step.
-
-    The planner's dynamics may differ from the environment's (plan with FIGNet, act with MuJoCo).
-
-    Args:
-        env: a Push or Toss environment (``gym.make`` adds the registered time limit).
-        planner: reset (with its config's seed) and bound to ``env`` first.
-        seed: of ``env.reset``.
-        max_steps: stop after this many steps even if the episode has not ended.
-        on_step: optional ``callable(env, planner)`` called after every step (e.g. rendering).
-
-    Returns:
-        ``{"return", "length", "diverged" (the acting env's dynamics blew up), "plan_seconds"
-        and "plan_cpu_seconds" (mean wall and CPU time per action), "diverged_candidates"
-        (fraction of planned rollouts that diverged)}``, plus on Push ``"is_success"``,
-        ``"position_error"`` (m), ``"orientation_error"`` (rad) and on Toss ``"num_in_target"``.
-    """
-    env.reset(seed=seed)
-    planner.reset()
-    planner.bind(env)
-    total, length, seconds, cpu, bad, evaluated = 0.0, 0, 0.0, 0.0, 0, 0
-    info: dict[str, Any] = {}
-    done = False
-    while not done and (max_steps is None or length < max_steps):
-        action = planner.plan(env)
-        assert planner.last is not None
-        seconds += planner.last.seconds
-        cpu += planner.last.cpu_seconds
-        bad += planner.last.diverged
-        evaluated += planner.last.evaluated
-        _, reward, terminated, truncated, info = env.step(action)
-        total += float(reward)
-        length += 1
-        done = terminated or truncated
-        if on_step is not None:
-            on_step(env, planner)
-    out: dict[str, Any] = {
-        "return": total,
-        "length": length,
-        "diverged": "diverged" in info,
-        "plan_seconds": seconds / max(length, 1),
-        "plan_cpu_seconds": cpu / max(length, 1),
-        "diverged_candidates": bad / max(evaluated, 1),
-    }
-    if "position_error" in info:
-        out["is_success"] = bool(info.get("is_success", False))
-        out["position_error"] = float(info["position_error"])
-        out["orientation_error"] = float(info["orientation_error"])
-    if "num_in_target" in info:
-        out["num_in_target"] = int(info["num_in_target"])
-    return out
+    return cls(dynamics, config, env=env, model=model)

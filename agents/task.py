@@ -1,16 +1,15 @@
 """Planning problems: an environment's own task as the cost of candidate actions under any dynamics.
 
-A planner proposes ``B`` action sequences ``float[B, T, A]``; a :class:`PlanningProblem` turns
-them into **one** batched ``Dynamics.rollout`` call from the environment's whole state
-(``env.get_state()``: full physics and mocap poses) and scores the predicted states with the
-environment's task (:mod:`fignet_gym.envs.tasks`, the functions its ``step`` calls): the cost is
-minus the reward ``env.step`` would return for the same states.
+A planner proposes ``B`` action sequences ``float[B, T, A]`` in ``[-1, 1]``; a
+:class:`PlanningProblem` maps them onto the environment's ``action_space``, turns them into **one**
+batched ``Dynamics.rollout`` call from the environment's whole state (``env.get_state()``: full
+physics, mocap poses and the pose history) and scores the predicted states with the environment's
+task (``env.task``, a :class:`fignet_gym.envs.tasks.Task`: the functions its ``step`` calls): the
+cost is minus the reward ``env.step`` would return for the same states.
 
-* :class:`PushProblem` (Push-v0/v1): ``T`` tip-velocity steps of ``frame_skip`` timesteps each,
-  plus an optional shaping term drawing the final tip to the pushing point behind the object.
-* :class:`TossProblem` (Toss-v0): one decision per release (``T = 1``); each candidate is the
-  release of the next object followed by a whole settle of the scene (``settle_steps`` recorded
-  states of ``frame_skip`` timesteps).
+Nothing here knows an environment: any environment with ``task`` (a ``Task``),
+``task_context()``, ``get_state()``, ``model`` and a ``Box`` ``action_space`` plans, the fignet_gym
+ones (Push, Toss, CubeToss) and a user's own alike.
 """
 
 from __future__ import annotations
@@ -20,9 +19,7 @@ import mujoco
 import numpy as np
 
 from fignet_gym.dynamics import STATE_SPEC, DivergenceError, Dynamics
-from fignet_gym.envs.base import MjDynamicsEnv
-from fignet_gym.envs.push import PushEnv
-from fignet_gym.envs.toss import TossEnv
+from fignet_gym.envs.tasks import Task
 
 #: State layout accepted by planners in place of an environment (``env.get_state()``).
 PLAN_STATE_SPEC = STATE_SPEC
@@ -33,12 +30,18 @@ def plan_state(env: gym.Env) -> np.ndarray:
     return _inner(env).get_state()
 
 
-def _inner(env: gym.Env) -> MjDynamicsEnv:
+def _inner(env: gym.Env) -> gym.Env:
     inner = getattr(env, "unwrapped", env)
-    if not isinstance(inner, MjDynamicsEnv):
+    missing = [m for m in ("task", "task_context", "get_state", "model", "action_space")
+               if not hasattr(inner, m)]
+    if missing or not isinstance(getattr(inner, "task", None), Task):
         raise TypeError(
-            f"planners need a fignet_gym environment (Push-v0/v1, Toss-v0), got {type(inner).__name__}"
+            f"planners need an environment that exposes its task (env.task: a "
+            f"fignet_gym.envs.tasks.Task, env.task_context(), env.get_state(), env.model): "
+            f"{type(inner).__name__} lacks {', '.join(missing) or 'a Task as env.task'}"
         )
+    if not isinstance(inner.action_space, gym.spaces.Box) or len(inner.action_space.shape) != 1:
+        raise TypeError(f"planners need a 1-D Box action space, got {inner.action_space}")
     return inner
 
 
@@ -49,7 +52,7 @@ def check_same_scene(planning: mujoco.MjModel, acting: mujoco.MjModel) -> None:
         return [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, i) or "" for i in range(m.nbody)]
 
     problems = []
-    for field in ("nq", "nv", "nmocap", "nbody", "njnt"):
+    for field in ("nq", "nv", "nmocap", "nbody", "njnt", "nuserdata"):
         a, b = getattr(planning, field), getattr(acting, field)
         if a != b:
             problems.append(f"{field} {a} vs {b}")
@@ -66,50 +69,61 @@ class PlanningProblem:
     """What a planner needs from an environment: its state, its action box, a batched cost.
 
     Args:
-        env: the environment to plan for (wrappers allowed).
+        env: the environment to plan for (wrappers allowed; see the module docstring).
         model: the model to roll out (default: the env's); it must have the env's state layout.
 
     Attributes:
-        env: the unwrapped environment. model: the planning model.
-        action_dim: ``A``. horizon: the planned steps ``T`` (``None``: the planner's choice).
+        env: the unwrapped environment. model: the planning model. task: ``env.task``.
+        action_dim: ``A``, from ``env.action_space``. horizon: the planned steps ``T`` (``None``:
+        the planner's choice; the task's ``plan_horizon``).
     """
-
-    action_dim = 2
-    horizon: int | None = None
 
     def __init__(self, env: gym.Env, model: mujoco.MjModel | None = None) -> None:
         self.env = _inner(env)
         self.model = self.env.model if model is None else model
         if model is not None:
             check_same_scene(model, self.env.model)
+        self.task: Task = self.env.task
+        space = self.env.action_space
+        self.action_dim = int(space.shape[0])
+        self.horizon = self.task.plan_horizon
+        self.low = np.asarray(space.low, dtype=np.float64)
+        self.high = np.asarray(space.high, dtype=np.float64)
+        if not (np.isfinite(self.low).all() and np.isfinite(self.high).all()):
+            raise TypeError(f"planners need a bounded action space, got {space}")
 
     def validate(self, dynamics: Dynamics) -> None:
         """``ValueError`` naming the env if ``dynamics`` cannot roll out this problem's model."""
+        scene = getattr(self.env, "scene_type", "")
         try:
-            dynamics.validate(self.model, self.frame_skip, self.env.scene_type)
+            dynamics.validate(self.model, self.frame_skip, scene)
         except ValueError as err:
             raise ValueError(
                 f"the planner's dynamics cannot plan for {type(self.env).__name__} "
-                f"('{self.env.scene_type}' scene): {err}"
+                f"('{scene}' scene): {err}"
             ) from None
 
     @property
     def frame_skip(self) -> int:
-        """MuJoCo timesteps per recorded rollout state."""
-        return self.env.nstep
+        """MuJoCo timesteps per environment step."""
+        return int(self.env.task_context()["frame_skip"])
+
+    def to_action(self, u: np.ndarray) -> np.ndarray:
+        """Planner space ``float[..., A]`` in ``[-1, 1]`` -> the env's action box."""
+        u = np.clip(np.asarray(u, dtype=np.float64), -1.0, 1.0)
+        return self.low + (u + 1.0) / 2.0 * (self.high - self.low)
 
     def rollout(self, dynamics: Dynamics, state: np.ndarray, actions: np.ndarray) -> np.ndarray:
-        """Predicted states ``float64[B, T', nstate]`` of candidates ``float[B, T, A]`` from
-        ``state float64[nstate]``, in one ``dynamics.rollout`` call (NaN rows: diverged)."""
-        raise NotImplementedError
+        """Predicted states ``float64[B, T', nstate]`` of candidates ``float[B, T, A]`` (planner
+        space) from ``state float64[nstate]``, in one ``dynamics.rollout`` call."""
+        return self.task.plan_rollout(dynamics, self.model, state, self.to_action(actions),
+                                      **self.env.task_context())
 
-    def costs(
-        self, states: np.ndarray, actions: np.ndarray, shaping: float, terminal: float
-    ) -> np.ndarray:
-        """``float64[B]`` cost of predicted states ``float64[B, T', nstate]`` (non-finite where
-        they are): minus their reward, ``terminal`` more times the last step's, plus ``shaping``
-        times a task-specific shaping term."""
-        raise NotImplementedError
+    def costs(self, state: np.ndarray, states: np.ndarray, actions: np.ndarray, shaping: float,
+              terminal: float) -> np.ndarray:
+        """``float64[B]`` cost of predicted states (see ``Task.plan_cost``)."""
+        return self.task.plan_cost(state, states, self.to_action(actions), shaping, terminal,
+                                   **self.env.task_context())
 
     def evaluate(
         self,
@@ -125,80 +139,16 @@ class PlanningProblem:
             states = self.rollout(dynamics, state, actions)
         except DivergenceError:  # a user Dynamics may raise instead of returning NaN rows
             return np.full(len(actions), np.inf), None
-        cost = self.costs(states, actions, shaping, terminal)
+        with np.errstate(invalid="ignore"):
+            cost = np.asarray(self.costs(state, states, actions, shaping, terminal), dtype=float)
         cost[~np.isfinite(cost)] = np.inf
         return cost, states
 
 
-class PushProblem(PlanningProblem):
-    """Push-v0/v1: minus the env's reward summed over the predicted steps (``env.task``), plus
-    ``shaping`` times the final tip's distance (m) to the pushing point behind the object."""
-
-    env: PushEnv
-
-    def __init__(self, env: gym.Env, model: mujoco.MjModel | None = None) -> None:
-        super().__init__(env, model)
-        if not isinstance(self.env, PushEnv):
-            raise TypeError(f"PushProblem needs a Push environment, got {type(self.env).__name__}")
-
-    def rollout(self, dynamics: Dynamics, state: np.ndarray, actions: np.ndarray) -> np.ndarray:
-        control = self.env.task.controls(state[None], actions)
-        return dynamics.rollout(self.model, state[None], control, frame_skip=self.frame_skip)
-
-    def costs(
-        self, states: np.ndarray, actions: np.ndarray, shaping: float, terminal: float
-    ) -> np.ndarray:
-        task, goal = self.env.task, self.env.goal
-        reward = task.reward(states, goal, actions)
-        cost = -reward.sum(axis=1) - terminal * reward[:, -1]
-        if shaping:
-            cost = cost + shaping * task.approach_distance(states[:, -1], goal)
-        return cost
-
-
-class TossProblem(PlanningProblem):
-    """Toss-v0: one release per decision; the cost is minus the reward of that step (distance of
-    the tossed object to the target, objects brought into or knocked out of it) after a whole
-    settle, predicted from the released state."""
-
-    env: TossEnv
-    horizon = 1
-
-    def __init__(self, env: gym.Env, model: mujoco.MjModel | None = None) -> None:
-        super().__init__(env, model)
-        if not isinstance(self.env, TossEnv):
-            raise TypeError(f"TossProblem needs a Toss environment, got {type(self.env).__name__}")
-
-    @property
-    def frame_skip(self) -> int:
-        return self.env.frame_skip
-
-    def rollout(self, dynamics: Dynamics, state: np.ndarray, actions: np.ndarray) -> np.ndarray:
-        env = self.env
-        k = env.released
-        if k >= env.task.num_objects:
-            raise RuntimeError("every object was tossed: reset the environment")
-        released = env.task.release(state[None], k, float(env.release_yaws[k]), actions[:, 0])
-        # Only the settled state counts (a learned model still steps every 0.02 s).
-        return dynamics.rollout(
-            self.model, released, None, nstep=env.settle_steps, frame_skip=self.frame_skip
-        )[:, -1:]
-
-    def costs(
-        self, states: np.ndarray, actions: np.ndarray, shaping: float, terminal: float
-    ) -> np.ndarray:
-        env = self.env
-        k = env.released
-        before = env.task.in_target(env.get_state(), env.target, k)
-        terms = env.task.reward_terms(states[:, -1], env.target, k, before)
-        return -(terms["reward_distance"] + terms["reward_in_target"])
+#: Former per-environment problems: every environment now has the one generic problem.
+PushProblem = TossProblem = PlanningProblem
 
 
 def problem_for(env: gym.Env, model: mujoco.MjModel | None = None) -> PlanningProblem:
-    """The planning problem of a Push or Toss environment (``TypeError`` for another one)."""
-    inner = _inner(env)
-    if isinstance(inner, PushEnv):
-        return PushProblem(inner, model)
-    if isinstance(inner, TossEnv):
-        return TossProblem(inner, model)
-    raise TypeError(f"no planning problem for {type(inner).__name__}: Push or Toss environments")
+    """The planning problem of an environment that exposes its task (``TypeError`` otherwise)."""
+    return PlanningProblem(env, model)

@@ -8,13 +8,15 @@ environments in one batched call:
 
 1. :meth:`MjDynamicsEnv._pre_step` checks the action and writes it into ``MjData`` (mocap targets,
    a released object's velocity);
-2. the dynamics advances ``MjData`` by :attr:`MjDynamicsEnv.nstep` MuJoCo timesteps;
+2. the dynamics advances ``MjData`` by :attr:`MjDynamicsEnv.frame_skip` MuJoCo timesteps
+   (Gymnasium's ``frame_skip``; :attr:`MjDynamicsEnv.dt` seconds);
 3. :meth:`MjDynamicsEnv._post_step` computes observation, reward and termination.
 """
 
 from __future__ import annotations
 
 import copy
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -36,7 +38,7 @@ class MjDynamicsEnv(gym.Env[np.ndarray, np.ndarray]):
         model: the compiled scene (shared, read-only).
         data: this environment's state.
         dynamics: what advances ``data``.
-        nstep: MuJoCo timesteps per environment step.
+        frame_skip: MuJoCo timesteps per environment step (Gymnasium's ``frame_skip``).
         observation_layout: name -> slice of the observation vector (as the class docstring says).
     """
 
@@ -49,7 +51,7 @@ class MjDynamicsEnv(gym.Env[np.ndarray, np.ndarray]):
         model: mujoco.MjModel,
         dynamics: str | Dynamics,
         checkpoint: Any,
-        nstep: int,
+        frame_skip: int,
         render_mode: str | None,
         width: int,
         height: int,
@@ -61,18 +63,31 @@ class MjDynamicsEnv(gym.Env[np.ndarray, np.ndarray]):
                 f"{self.metadata['render_modes']} or None, got {render_mode!r}"
             )
         self.model = model
-        self.nstep = int(nstep)
+        self.frame_skip = int(frame_skip)
         self.dynamics = make_dynamics(
             dynamics, checkpoint, self.scene_type, **(dynamics_kwargs or {})
         )
-        self.dynamics.validate(model, self.nstep, self.scene_type)
+        self.dynamics.validate(model, self.frame_skip, self.scene_type)
         self.render_mode = render_mode
         self.width, self.height = int(width), int(height)
         self.metadata = {
             **self.metadata,
-            "render_fps": max(1, round(1.0 / (self.nstep * model.opt.timestep))),
+            "render_fps": max(1, round(1.0 / self.dt)),
         }
         self._init_state()
+
+    @property
+    def dt(self) -> float:
+        """Seconds per environment step: ``frame_skip * model.opt.timestep`` (as Gymnasium's
+        MuJoCo environments define it)."""
+        return self.frame_skip * float(self.model.opt.timestep)
+
+    @property
+    def nstep(self) -> int:
+        """Deprecated spelling of :attr:`frame_skip`."""
+        warnings.warn("env.nstep is deprecated: use env.frame_skip (MuJoCo timesteps per "
+                      "environment step)", DeprecationWarning, stacklevel=2)
+        return self.frame_skip
 
     def _init_state(self) -> None:
         """Per-instance state: ``MjData``, renderer, random generator (also for :meth:`_spawn`)."""
@@ -95,6 +110,12 @@ class MjDynamicsEnv(gym.Env[np.ndarray, np.ndarray]):
         task, e.g. the goal, is unchanged)."""
         mujoco.mj_setState(self.model, self.data, np.asarray(state, dtype=np.float64), STATE_SPEC)
         mujoco.mj_forward(self.model, self.data)
+
+    def task_context(self) -> dict[str, Any]:
+        """What the task of this episode needs besides the state (``env.task``'s
+        ``plan_rollout``/``plan_cost`` keywords): ``frame_skip`` and, per env, its goal or
+        target."""
+        return {"frame_skip": self.frame_skip}
 
     def observe(self) -> np.ndarray:
         """The observation ``float32[D]`` of the current state (what ``step`` would return)."""
@@ -136,12 +157,12 @@ class MjDynamicsEnv(gym.Env[np.ndarray, np.ndarray]):
         return self._observe(), {}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        """One environment step (``nstep`` MuJoCo timesteps of ``dynamics``)."""
+        """One environment step (``frame_skip`` MuJoCo timesteps of ``dynamics``)."""
         self._check_was_reset()
         act = self._pre_step(action)
         reason = None
         try:
-            self.dynamics.step(self.model, self.data, self.nstep)
+            self.dynamics.step(self.model, self.data, self.frame_skip)
         except DivergenceError as err:
             reason = err.reason
         return self._post_step(act, reason)

@@ -12,9 +12,10 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from fignet_gym.dynamics import Dynamics
+from fignet_gym.dynamics import STATE_SPEC, Dynamics, compile_with_history
 from fignet_gym.dynamics.contact_params import ContactParams
 from fignet_gym.envs.base import MjDynamicsEnv, add_disc, free_camera, layout, layout_size
+from fignet_gym.envs.tasks import CubeTossTask, resting_yaw, wrap_quarter  # noqa: F401  (re-exported)
 from fignet_gym.envs.vector import SingleEnvVectorEnv
 from fignet_gym.mjcf import (
     ROLLING_FRICTION,
@@ -96,24 +97,6 @@ def cube_toss_xml(params: ContactParams) -> str:
         dampratio=params.dampratio, cone=params.cone, impratio=params.impratio)
 
 
-def resting_yaw(quat: np.ndarray) -> float:
-    """Heading (rad, in ``[-pi/4, pi/4)``) of a cube about the vertical, modulo its 90-degree
-    symmetry: the angle of whichever body axis lies most nearly horizontal-and-first, taken from
-    the two axes that are not the most vertical one. ``quat float[4]`` (w, x, y, z)."""
-    rot = np.empty(9)
-    mujoco.mju_quat2Mat(rot, np.asarray(quat, dtype=np.float64))
-    axes = rot.reshape(3, 3).T  # rows: body axes in world coordinates
-    up = int(np.argmax(np.abs(axes[:, 2])))
-    side = axes[(up + 1) % 3]
-    return float(wrap_quarter(math.atan2(side[1], side[0])))
-
-
-def wrap_quarter(a: float | np.ndarray) -> np.ndarray:
-    """Angle(s) modulo a quarter turn, in ``[-pi/4, pi/4)``."""
-    q = np.pi / 2
-    return (np.asarray(a) + q / 2) % q - q / 2
-
-
 def cube_toss_layout() -> dict[str, slice]:
     """Observation layout of :class:`CubeTossEnv`."""
     return layout(("tossed", 1), ("position", 3), ("quaternion", 4), ("target_rel_xy", 2),
@@ -177,7 +160,7 @@ class CubeTossEnv(MjDynamicsEnv):
     | reward_yaw | ``-yaw_weight * abs(psi)`` |
     | reward_success | ``success_bonus`` if ``d <= target_radius`` and ``abs(psi) <= yaw_tolerance`` |
 
-    ``info`` also holds ``distance`` (m), ``yaw_error_deg``, ``success``, ``speed`` (m/s at the
+    ``info`` also holds ``distance`` (m), ``yaw_error_deg``, ``is_success``, ``speed`` (m/s at the
     end: how nearly at rest the cube is), ``mujoco_source``; ``info["diverged"]`` names a
     dynamics failure.
 
@@ -254,13 +237,17 @@ class CubeTossEnv(MjDynamicsEnv):
         # The learned model sees the scene it was trained on (its props are input features);
         # only MuJoCo gets the fitted contact parameters.
         self.mujoco_params = mujoco_parameters(mujoco_params if dynamics == "mujoco" else "nominal")
-        model = mujoco.MjModel.from_xml_string(cube_toss_xml(self.mujoco_params))
-        per_step = round(DATA_DT / model.opt.timestep)
+        model = compile_with_history(cube_toss_xml(self.mujoco_params))
+        self.settle_frame_skip = round(DATA_DT / model.opt.timestep)  # per learned step
+        self.task = CubeTossTask(
+            model, self.speed_range, self.vertical_range, self.spin_range, self.target_radius,
+            self.yaw_tolerance, self.distance_weight, self.yaw_weight, self.success_bonus)
         self.observation_layout = cube_toss_layout()
         self.action_space = spaces.Box(-1.0, 1.0, (6,), np.float32)
         self.observation_space = spaces.Box(
             -np.inf, np.inf, (layout_size(self.observation_layout),), np.float32)
-        super().__init__(model, dynamics, checkpoint, per_step * self.settle_steps, render_mode,
+        super().__init__(model, dynamics, checkpoint, self.settle_frame_skip * self.settle_steps,
+                         render_mode,
                          width, height, dynamics_kwargs)
 
     def _init_state(self) -> None:
@@ -282,25 +269,25 @@ class CubeTossEnv(MjDynamicsEnv):
 
     def release_velocity(self, action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World linear ``float[3]`` (m/s) and angular ``float[3]`` (rad/s) velocity of an action."""
-        u = (np.asarray(action, dtype=np.float64) + 1) / 2  # [0, 1]
-        heading = -np.pi + 2 * np.pi * u[0]
-        speed = self.speed_range[0] + u[1] * (self.speed_range[1] - self.speed_range[0])
-        vz = self.vertical_range[0] + u[2] * (self.vertical_range[1] - self.vertical_range[0])
-        lin = np.array([speed * np.cos(heading), speed * np.sin(heading), vz])
-        return lin, (2 * u[3:] - 1) * self.spin_range
+        return self.task.release_velocity(action)
 
-    def _apply_action(self, action: np.ndarray) -> None:
+    def task_context(self) -> dict[str, Any]:
+        """The episode's target pose, for :class:`~fignet_gym.envs.tasks.CubeTossTask`."""
+        return {**super().task_context(), "target": self.target.copy(),
+                "target_yaw": self.target_yaw}
+
+    def _check_ready(self) -> None:
         if self.tossed:
             raise RuntimeError(f"{type(self).__name__}: the cube was tossed; call reset()")
-        lin, ang = self.release_velocity(action)
-        rot = np.empty(9)
-        mujoco.mju_quat2Mat(rot, self.data.qpos[3:7])
-        # A free joint's angular velocity is in the body frame.
-        self.data.qvel[:6] = (*lin, *(rot.reshape(3, 3).T @ ang))
+
+    def _apply_action(self, action: np.ndarray) -> None:
+        self._check_ready()
+        mujoco.mj_setState(self.model, self.data, self.task.release(self.get_state(), action),
+                           STATE_SPEC)
         self.tossed = True
 
     def _yaw_error(self) -> float:
-        return float(wrap_quarter(resting_yaw(self.data.qpos[3:7]) - self.target_yaw))
+        return float(self.task.errors(self.get_state(), self.target, self.target_yaw)[1])
 
     def _observe(self) -> np.ndarray:
         lay = self.observation_layout
@@ -315,14 +302,13 @@ class CubeTossEnv(MjDynamicsEnv):
         return obs.astype(np.float32)
 
     def _evaluate(self, action: np.ndarray) -> tuple[dict[str, float], bool, bool, dict[str, Any]]:
-        dist = float(np.linalg.norm(self.data.qpos[:2] - self.target))
-        psi = self._yaw_error()
-        success = dist <= self.target_radius and abs(psi) <= self.yaw_tolerance
-        terms = {"reward_distance": -self.distance_weight * dist,
-                 "reward_yaw": -self.yaw_weight * abs(psi),
-                 "reward_success": self.success_bonus * float(success)}
-        info = {"distance": dist, "yaw_error_deg": math.degrees(psi), "success": success,
-                "is_success": success,  # the key run_episode and SB3's evaluate_policy read
+        state = self.get_state()
+        dist, psi = (float(x) for x in self.task.errors(state, self.target, self.target_yaw))
+        success = bool(self.task.is_success(state, self.target, self.target_yaw))
+        terms = {k: float(v) for k, v in
+                 self.task.reward_terms(state, self.target, self.target_yaw).items()}
+        info = {"distance": dist, "yaw_error_deg": math.degrees(psi),
+                "is_success": success,  # SB3's key (evaluate_policy), as in Push
                 "speed": float(np.linalg.norm(self.data.qvel[:3])),
                 "mujoco_source": self.mujoco_params.source}
         return terms, True, False, info

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from fignet_gym.dynamics import Dynamics
+from fignet_gym.dynamics import Dynamics, compile_with_history
 from fignet_gym.envs.base import (
     MjDynamicsEnv,
     check_arguments,
@@ -184,7 +185,7 @@ class PushEnv(MjDynamicsEnv):
             max_lift=(max_lift, "positive"), min_upright=(min_upright, "finite"),
             width=(width, "count"), height=(height, "count"))
         obj = push_object(shape)
-        model = mujoco.MjModel.from_xml_string(
+        model = compile_with_history(
             push_scene_xml(shape, friction=friction, tip_friction=tip_friction)
         )
         self.shape = shape
@@ -215,7 +216,7 @@ class PushEnv(MjDynamicsEnv):
             obj.outline,
             self._rest_z,
             max_speed=self.max_speed,
-            step_time=frame_skip * float(model.opt.timestep),
+            dt=frame_skip * float(model.opt.timestep),
             tip_bound=self._tip_bound,
             position_weight=position_weight,
             orientation_weight=orientation_weight,
@@ -236,7 +237,13 @@ class PushEnv(MjDynamicsEnv):
         super().__init__(
             model, dynamics, checkpoint, frame_skip, render_mode, width, height, dynamics_kwargs
         )
-        self.step_time = self.nstep * float(model.opt.timestep)
+
+    @property
+    def step_time(self) -> float:
+        """Deprecated spelling of :attr:`dt`."""
+        warnings.warn("PushEnv.step_time is deprecated: use env.dt", DeprecationWarning,
+                      stacklevel=2)
+        return self.dt
 
     def _init_state(self) -> None:
         super()._init_state()
@@ -277,6 +284,10 @@ class PushEnv(MjDynamicsEnv):
             tip = contact - self.tip_gap * unit + side
         self.data.mocap_pos[self._tip_mocap, :2] = tip
         self.data.mocap_quat[self._tip_mocap] = (1.0, 0.0, 0.0, 0.0)
+
+    def task_context(self) -> dict[str, Any]:
+        """The episode's goal, for :class:`~fignet_gym.envs.tasks.PushTask`."""
+        return {**super().task_context(), "goal": self.goal.copy()}
 
     def _apply_action(self, action: np.ndarray) -> None:
         tip = self.data.mocap_pos[self._tip_mocap]

@@ -6,8 +6,13 @@ the same function scores one live ``MjData`` in ``env.step`` and ``B x T`` predi
 planner's cost: planner cost and environment reward cannot drift apart. Every function takes
 arrays with any leading batch shape ``[...]`` and broadcasts goals and actions against it.
 
+* :class:`Task`: what a planner calls (:meth:`Task.plan_rollout`, :meth:`Task.plan_cost`); an
+  environment exposes its task as ``env.task`` and the episode's parameters (goal, target, ...) as
+  ``env.task_context()``, so planners know no environment. A user's environment plans the same
+  way by exposing a :class:`Task` subclass.
 * :class:`PushTask`: tip motion of an action sequence, reward terms, success, truncation.
 * :class:`TossTask`: the release of an object, reward terms, objects in the target.
+* :class:`CubeTossTask`: the release of the cube, reward terms of its resting pose.
 """
 
 from __future__ import annotations
@@ -17,52 +22,44 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
-from fignet_gym.dynamics import STATE_SPEC, state_offsets
+from fignet_gym.dynamics import Dynamics
+from fignet_gym.envs.poses import (  # noqa: F401  (re-exported: the tasks' vocabulary)
+    StateLayout,
+    resting_yaw,
+    wrap_angle,
+    wrap_quarter,
+    yaw_of,
+)
 
 
-def yaw_of(quat: np.ndarray) -> np.ndarray:
-    """Heading (rad) about +z of unit quaternions (w, x, y, z): ``float[..., 4] -> float[...]``."""
-    w, x, y, z = np.moveaxis(np.asarray(quat, dtype=np.float64), -1, 0)
-    return np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+class Task:
+    """The planning side of a task: candidates rolled out and scored from a whole state.
 
-
-def wrap_angle(a: np.ndarray | float) -> np.ndarray:
-    """Angle(s) wrapped to ``[-pi, pi)``."""
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
-
-
-class StateLayout:
-    """Where ``qpos``, ``qvel`` and the mocap poses sit in a :data:`STATE_SPEC` vector.
+    ``context`` is the environment's ``task_context()``: its ``frame_skip`` and the episode's
+    parameters (a goal, a target, ...), passed by keyword.
 
     Attributes:
-        nstate: its length. qpos, qvel: offsets of ``qpos[0]`` and ``qvel[0]``.
-        mocap_pos, mocap_quat: offsets of ``mocap_pos[0, 0]`` and ``mocap_quat[0, 0]``.
+        plan_horizon: decisions per plan (``None``: the planner's own horizon; 1: one-shot tasks).
     """
 
-    def __init__(self, model: mujoco.MjModel) -> None:
-        self.nstate = mujoco.mj_stateSize(model, STATE_SPEC)
-        self.qpos = 1  # after time
-        self.qvel = 1 + model.nq
-        self.mocap_pos = state_offsets(model)[0]
-        self.mocap_quat = self.mocap_pos + 3 * model.nmocap
-        self.nmocap = model.nmocap
+    plan_horizon: int | None = None
 
-    def check(self, states: np.ndarray, owner: str) -> np.ndarray:
-        """``states`` as ``float64[..., nstate]``; ``ValueError`` naming ``owner`` otherwise."""
-        states = np.asarray(states, dtype=np.float64)
-        if states.shape[-1:] != (self.nstate,):
-            raise ValueError(
-                f"{owner}: states must be float[..., {self.nstate}] (STATE_SPEC, from "
-                f"mujoco.mj_getState or Dynamics.rollout), got shape {states.shape}"
-            )
-        return states
+    def plan_rollout(self, dynamics: Dynamics, model: mujoco.MjModel, state: np.ndarray,
+                     actions: np.ndarray, **context: object) -> np.ndarray:
+        """Predicted states ``float64[B, T', nstate]`` of candidates ``float[B, T, A]`` (actions in
+        the env's ``action_space``) from ``state float64[nstate]``, in one ``dynamics.rollout``
+        call (NaN rows: diverged)."""
+        raise NotImplementedError
 
-    def mocap(self, states: np.ndarray) -> np.ndarray:
-        """``float[..., nmocap * 7]`` mocap positions then quaternions (the control layout)."""
-        return states[..., self.mocap_pos : self.mocap_quat + 4 * self.nmocap]
+    def plan_cost(self, state: np.ndarray, states: np.ndarray, actions: np.ndarray,
+                  shaping: float = 0.0, terminal: float = 0.0, **context: object) -> np.ndarray:
+        """``float64[B]`` cost of predicted ``states float64[B, T', nstate]`` from ``state``:
+        minus the reward the env would return, ``terminal`` more times the last step's, plus
+        ``shaping`` times a task-specific shaping term (non-finite where the states are)."""
+        raise NotImplementedError
 
 
-class PushTask:
+class PushTask(Task):
     """The push task of :class:`~fignet_gym.envs.push.PushEnv` on arrays of states.
 
     Args:
@@ -70,7 +67,7 @@ class PushTask:
         outline: ``float[K, 2]`` the object's outline in its frame (m).
         rest_z: the object's resting height (m).
         max_speed: tip speed (m/s) at ``|action| = 1`` per axis.
-        step_time: seconds per environment step.
+        dt: seconds per environment step.
         tip_bound: the tip stays within ``[-tip_bound, tip_bound]`` on x and y (m).
         position_weight, orientation_weight, action_weight: reward weights (1/m, 1/rad, 1).
         success_weight: reward of a step that ends in success (0: no such term).
@@ -86,7 +83,7 @@ class PushTask:
         outline: np.ndarray,
         rest_z: float,
         max_speed: float,
-        step_time: float,
+        dt: float,
         tip_bound: float,
         position_weight: float,
         orientation_weight: float,
@@ -108,7 +105,7 @@ class PushTask:
         self.tip_radius = float(model.geom_size[tip_geom, 0])
         self.outline = np.asarray(outline, dtype=np.float64)
         self.rest_z = float(rest_z)
-        self.max_speed, self.step_time = float(max_speed), float(step_time)
+        self.max_speed, self.dt = float(max_speed), float(dt)
         self.tip_bound = float(tip_bound)
         self.position_weight = float(position_weight)
         self.orientation_weight = float(orientation_weight)
@@ -135,9 +132,9 @@ class PushTask:
     def tip_path(self, tip_xy: np.ndarray, actions: np.ndarray) -> np.ndarray:
         """Tip positions after each action: ``float[..., 2]``, ``float[..., T, 2] -> float[..., T,
         2]``. Actions are clipped to ``[-1, 1]``, each step moves the tip by ``action * max_speed *
-        step_time`` and the tip is kept within ``tip_bound``."""
+        dt`` and the tip is kept within ``tip_bound``."""
         step = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0) * (
-            self.max_speed * self.step_time
+            self.max_speed * self.dt
         )
         out = np.empty(np.broadcast_shapes(step.shape, np.shape(tip_xy)[:-1] + (1, 2)))
         tip = np.asarray(tip_xy, dtype=np.float64)
@@ -239,7 +236,25 @@ class PushTask:
         return np.linalg.norm(self.tip_xy(states) - self.pushing_point(states, goal), axis=-1)
 
 
-class TossTask:
+    # ----------------------------------------------------------------- planning
+    def plan_rollout(self, dynamics: Dynamics, model: mujoco.MjModel, state: np.ndarray,
+                     actions: np.ndarray, **context: object) -> np.ndarray:
+        """:meth:`Task.plan_rollout`: ``T`` tip steps of ``frame_skip`` timesteps each."""
+        control = self.controls(state[None], actions)
+        return dynamics.rollout(model, state[None], control, frame_skip=int(context["frame_skip"]))
+
+    def plan_cost(self, state: np.ndarray, states: np.ndarray, actions: np.ndarray,
+                  shaping: float = 0.0, terminal: float = 0.0, **context: object) -> np.ndarray:
+        """:meth:`Task.plan_cost` towards ``goal``; shaping: :meth:`approach_distance`."""
+        goal = np.asarray(context["goal"])
+        reward = self.reward(states, goal, actions)
+        cost = -reward.sum(axis=1) - terminal * reward[:, -1]
+        if shaping:
+            cost = cost + shaping * self.approach_distance(states[:, -1], goal)
+        return cost
+
+
+class TossTask(Task):
     """The toss task of :class:`~fignet_gym.envs.toss.TossEnv` on arrays of states.
 
     Args:
@@ -345,3 +360,128 @@ class TossTask:
             "reward_distance": -self.distance_weight * dist,
             "reward_in_target": self.in_target_weight * (n_in - np.asarray(in_before)).astype(float),
         }
+
+
+    # ----------------------------------------------------------------- planning
+    plan_horizon = 1
+
+    def plan_rollout(self, dynamics: Dynamics, model: mujoco.MjModel, state: np.ndarray,
+                     actions: np.ndarray, **context: object) -> np.ndarray:
+        """:meth:`Task.plan_rollout`: the release of object ``released`` by each candidate's only
+        action, then the whole settle (``frame_skip`` timesteps); the settled state ``T' = 1``."""
+        k = int(context["released"])
+        if k >= self.num_objects:
+            raise RuntimeError("every object was tossed: reset the environment")
+        start = self.release(state[None], k, float(context["release_yaw"]), actions[:, 0])
+        skip = int(context["frame_skip"])
+        return dynamics.rollout(model, start, np.zeros((len(start), 1, 0)), nstep=skip,
+                                frame_skip=skip)
+
+    def plan_cost(self, state: np.ndarray, states: np.ndarray, actions: np.ndarray,
+                  shaping: float = 0.0, terminal: float = 0.0, **context: object) -> np.ndarray:
+        """:meth:`Task.plan_cost`: minus the reward of the release step (no shaping)."""
+        k, target = int(context["released"]), np.asarray(context["target"])
+        before = self.in_target(state, target, k)
+        terms = self.reward_terms(states[:, -1], target, k, before)
+        return -(terms["reward_distance"] + terms["reward_in_target"])
+
+
+class CubeTossTask(Task):
+    """The cube toss of :class:`~fignet_gym.envs.cube_toss.CubeTossEnv` on arrays of states.
+
+    Args:
+        model: the cube scene (one free body, the cube).
+        speed_range: horizontal release speed (m/s) at action 1 = -1 and +1.
+        vertical_range: vertical release velocity (m/s) at action 2 = -1 and +1.
+        spin_range: ``float[3]`` world angular velocity (rad/s) at actions 3:6 = +1.
+        target_radius: m. yaw_tolerance: rad. distance_weight: 1/m. yaw_weight: 1/rad.
+        success_bonus: reward of a success.
+    """
+
+    plan_horizon = 1
+
+    def __init__(self, model: mujoco.MjModel, speed_range: Sequence[float],
+                 vertical_range: Sequence[float], spin_range: Sequence[float], target_radius: float,
+                 yaw_tolerance: float, distance_weight: float, yaw_weight: float,
+                 success_bonus: float) -> None:
+        self.layout = StateLayout(model)
+        self.qadr, self.dadr = int(model.jnt_qposadr[0]), int(model.jnt_dofadr[0])
+        self.speed_range = np.asarray(speed_range, dtype=np.float64)
+        self.vertical_range = np.asarray(vertical_range, dtype=np.float64)
+        self.spin_range = np.asarray(spin_range, dtype=np.float64)
+        self.target_radius, self.yaw_tolerance = float(target_radius), float(yaw_tolerance)
+        self.distance_weight, self.yaw_weight = float(distance_weight), float(yaw_weight)
+        self.success_bonus = float(success_bonus)
+
+    def pose(self, states: np.ndarray) -> np.ndarray:
+        """``float[..., nstate] -> float[..., 7]`` the cube's position and quaternion."""
+        states = self.layout.check(states, "CubeTossTask")
+        i = self.layout.qpos + self.qadr
+        return states[..., i : i + 7]
+
+    def release_velocity(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``float[..., 6]`` -> world linear and angular velocity, two ``float[..., 3]`` (m/s,
+        rad/s): heading, speed, vertical velocity and spin, each linear in its action."""
+        u = (np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0) + 1) / 2  # [0, 1]
+        heading = -np.pi + 2 * np.pi * u[..., 0]
+        speed = self.speed_range[0] + u[..., 1] * (self.speed_range[1] - self.speed_range[0])
+        vz = self.vertical_range[0] + u[..., 2] * (self.vertical_range[1] - self.vertical_range[0])
+        lin = np.stack([speed * np.cos(heading), speed * np.sin(heading), vz], -1)
+        return lin, (2 * u[..., 3:] - 1) * self.spin_range
+
+    def release(self, states: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        """States with the cube given the velocity of ``actions``: ``float[..., nstate]``,
+        ``float[..., 6]`` -> ``float[..., nstate]`` (a free joint's angular velocity is in its
+        body frame: the world spin rotated by the inverse of the cube's quaternion)."""
+        states = self.layout.check(states, "CubeTossTask")
+        lin, ang = self.release_velocity(actions)
+        shape = np.broadcast_shapes(states.shape[:-1], lin.shape[:-1])
+        out = np.broadcast_to(states, (*shape, states.shape[-1])).copy()
+        q = self.pose(out)[..., 3:]
+        q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+        qv, w = -q[..., 1:], q[..., :1]  # the conjugate: world -> body
+        t = 2.0 * np.cross(qv, ang)
+        ang_body = ang + w * t + np.cross(qv, t)
+        da = self.layout.qvel + self.dadr
+        out[..., da : da + 3] = lin
+        out[..., da + 3 : da + 6] = ang_body
+        return out
+
+    def errors(self, states: np.ndarray, target: np.ndarray, target_yaw: float | np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """xy distance (m) to ``target float[..., 2]`` and heading error modulo 90 degrees (rad,
+        signed) to ``target_yaw``: two ``float[...]``."""
+        pose = self.pose(states)
+        dist = np.linalg.norm(pose[..., :2] - np.asarray(target, dtype=np.float64), axis=-1)
+        return dist, wrap_quarter(resting_yaw(pose[..., 3:]) - target_yaw)
+
+    def reward_terms(self, states: np.ndarray, target: np.ndarray, target_yaw: float | np.ndarray
+                     ) -> dict[str, np.ndarray]:
+        """The env's reward terms of resting ``states float[..., nstate]`` (their sum is its
+        reward), each ``float[...]``."""
+        dist, psi = self.errors(states, target, target_yaw)
+        return {"reward_distance": -self.distance_weight * dist,
+                "reward_yaw": -self.yaw_weight * np.abs(psi),
+                "reward_success": self.success_bonus * self.is_success(states, target, target_yaw)}
+
+    def is_success(self, states: np.ndarray, target: np.ndarray, target_yaw: float | np.ndarray
+                   ) -> np.ndarray:
+        """``float[...]`` 1 where the cube rests within ``target_radius`` and ``yaw_tolerance``."""
+        dist, psi = self.errors(states, target, target_yaw)
+        return ((dist <= self.target_radius) & (np.abs(psi) <= self.yaw_tolerance)).astype(float)
+
+    def plan_rollout(self, dynamics: Dynamics, model: mujoco.MjModel, state: np.ndarray,
+                     actions: np.ndarray, **context: object) -> np.ndarray:
+        """:meth:`Task.plan_rollout`: the toss of each candidate's only action, settled for the
+        env's ``frame_skip`` timesteps; the resting state (``T' = 1``)."""
+        skip = int(context["frame_skip"])
+        start = self.release(state[None], actions[:, 0])
+        return dynamics.rollout(model, start, np.zeros((len(start), 1, 0)), nstep=skip,
+                                frame_skip=skip)
+
+    def plan_cost(self, state: np.ndarray, states: np.ndarray, actions: np.ndarray,
+                  shaping: float = 0.0, terminal: float = 0.0, **context: object) -> np.ndarray:
+        """:meth:`Task.plan_cost`: minus the env's reward of the resting state (no shaping)."""
+        terms = self.reward_terms(states[:, -1], np.asarray(context["target"]),
+                                  float(context["target_yaw"]))
+        return -sum(terms.values())

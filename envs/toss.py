@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -9,7 +10,7 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from fignet_gym.dynamics import STATE_SPEC, Dynamics
+from fignet_gym.dynamics import STATE_SPEC, Dynamics, compile_with_history
 from fignet_gym.envs.base import MjDynamicsEnv, add_disc, check_arguments, free_camera, layout, layout_size
 from fignet_gym.envs.tasks import TossTask
 from fignet_gym.envs.vector import SingleEnvVectorEnv
@@ -39,8 +40,9 @@ class TossEnv(MjDynamicsEnv):
 
     Each step releases the next object from a fixed point (``release_position``, a random heading
     drawn at reset) with the horizontal velocity chosen by the action, then lets the scene evolve
-    for ``settle_steps`` learned steps (``settle_steps * frame_skip`` MuJoCo timesteps, 1.5 s by
-    default) so that it comes to rest, possibly against or on top of the objects already there.
+    for ``settle_steps`` learned steps (``settle_steps * settle_frame_skip`` MuJoCo timesteps:
+    the env's ``frame_skip``, 1.5 s by default) so that it comes to rest, possibly against or on
+    top of the objects already there.
     If an object already lies under the release point, the release point rises above it (a chute
     over the pile) so that objects never start interpenetrating. Unreleased objects wait at rest on
     the floor far away (``x = -10`` m). The episode ends after the K-th release.
@@ -105,7 +107,7 @@ class TossEnv(MjDynamicsEnv):
     | checkpoint | ``None`` | ``"fignet"``: path or ``LearnedSimulator`` (default: pretrained) |
     | objects | ``None`` | ``Sequence[TossObject]`` (default: three metal cubes of size 0.7) |
     | floor_half_size | ``20.0`` | floor half side (m; the training data's: keep it for fignet) |
-    | frame_skip | ``10`` | MuJoCo timesteps (2 ms) per learned step |
+    | settle_frame_skip | ``10`` | MuJoCo timesteps (2 ms) per learned step of the settle |
     | settle_steps | ``75`` | learned steps (of 0.02 s) each toss is simulated for |
     | release_position | ``(-2, 0, 1.2)`` | where objects are released (m) |
     | release_velocity_low | ``(2.5, -2)`` | horizontal release velocity at action -1 (m/s) |
@@ -119,6 +121,7 @@ class TossEnv(MjDynamicsEnv):
     | width | ``480`` | rendered frame width (px) |
     | height | ``480`` | rendered frame height (px) |
     | dynamics_kwargs | ``None`` | extra dynamics arguments (e.g. fignet's ``max_distance``) |
+    | frame_skip | ``None`` | deprecated: ``settle_frame_skip`` (``env.frame_skip``: a whole step) |
     """
 
     scene_type = "toss"
@@ -129,7 +132,7 @@ class TossEnv(MjDynamicsEnv):
         checkpoint: Any = None,
         objects: Sequence[TossObject] | None = None,
         floor_half_size: float = 20.0,
-        frame_skip: int = 10,
+        settle_frame_skip: int = 10,
         settle_steps: int = 75,
         release_position: Sequence[float] = (-2.0, 0.0, 1.2),
         release_velocity_low: Sequence[float] = (2.5, -2.0),
@@ -143,9 +146,16 @@ class TossEnv(MjDynamicsEnv):
         width: int = 480,
         height: int = 480,
         dynamics_kwargs: dict[str, Any] | None = None,
+        frame_skip: int | None = None,
     ) -> None:
+        if frame_skip is not None:  # the old name, per learned step, not per env step
+            warnings.warn("TossEnv(frame_skip=...) is deprecated: it is now settle_frame_skip "
+                          "(timesteps per learned step of the settle); env.frame_skip is the "
+                          "timesteps of a whole env step", DeprecationWarning, stacklevel=2)
+            settle_frame_skip = frame_skip
         check_arguments(
-            "TossEnv", floor_half_size=(floor_half_size, "positive"), frame_skip=(frame_skip, "count"),
+            "TossEnv", floor_half_size=(floor_half_size, "positive"),
+            settle_frame_skip=(settle_frame_skip, "count"),
             settle_steps=(settle_steps, "count"), release_position=(release_position, "vector3"),
             release_velocity_low=(release_velocity_low, "vector2"),
             release_velocity_high=(release_velocity_high, "vector2"),
@@ -190,7 +200,7 @@ class TossEnv(MjDynamicsEnv):
         self._park = np.array(
             [[PARK_X, y, z, 1, 0, 0, 0] for y, z in zip(park_y, rest_z, strict=True)]
         )
-        model = mujoco.MjModel.from_xml_string(
+        model = compile_with_history(
             toss_scene_xml(self.objects, floor_half_size=floor_half_size, poses=self._park)
         )
         self.task = TossTask(
@@ -204,7 +214,7 @@ class TossEnv(MjDynamicsEnv):
             self.in_target_weight,
         )
         self._qadr, self._dadr = self.task.qadr, self.task.dadr
-        self.frame_skip = int(frame_skip)
+        self.settle_frame_skip = int(settle_frame_skip)
         self.observation_layout = toss_layout(k)
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.observation_space = spaces.Box(
@@ -214,7 +224,7 @@ class TossEnv(MjDynamicsEnv):
             model,
             dynamics,
             checkpoint,
-            frame_skip * self.settle_steps,
+            self.settle_frame_skip * self.settle_steps,
             render_mode,
             width,
             height,
@@ -242,6 +252,14 @@ class TossEnv(MjDynamicsEnv):
         self.released = 0
         self._in_before = 0
         # qpos0 holds the parked poses (mj_resetData ran before this).
+
+    def task_context(self) -> dict[str, Any]:
+        """The target, the next object and its heading, for
+        :class:`~fignet_gym.envs.tasks.TossTask`."""
+        k = self.released
+        yaw = float(self.release_yaws[k]) if k < len(self.objects) else 0.0
+        return {**super().task_context(), "target": self.target.copy(), "released": k,
+                "release_yaw": yaw}
 
     def _check_ready(self) -> None:
         if self.released >= len(self.objects):

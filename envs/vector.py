@@ -57,7 +57,7 @@ class BatchedVectorEnv(VectorEnv):
         self.num_envs = int(num_envs)
         self.model = env.model
         self.dynamics = env.dynamics
-        self.nstep = env.nstep
+        self.frame_skip = env.frame_skip
         self.max_episode_steps = max_episode_steps
         self.autoreset_mode = AutoresetMode(autoreset_mode)
         self.single_observation_space = env.observation_space
@@ -147,7 +147,7 @@ class BatchedVectorEnv(VectorEnv):
             self.envs[i]._apply_action(applied[i])
         reasons: dict[int, str] = {}
         try:
-            self.dynamics.step_many(self.model, [self.envs[i].data for i in stepping], self.nstep)
+            self.dynamics.step_many(self.model, [self.envs[i].data for i in stepping], self.frame_skip)
         except DivergenceError as err:
             for j, r in zip(err.indices, err.reasons, strict=True):
                 reasons[int(stepping[j])] = r

@@ -81,7 +81,7 @@ def scripted_action(env: gym.Env) -> np.ndarray:
         target = contact - 0.004 * unit
     else:  # in line: push, steering back onto the line
         return np.clip(unit - 30.0 * lateral * side, -1, 1)
-    step_len = u.max_speed * u.step_time  # how far the tip moves per step at |action| = 1
+    step_len = u.max_speed * u.dt  # how far the tip moves per step at |action| = 1
     return np.clip((target - tip) / step_len, -1, 1)  # arrive without overshooting
 
 

@@ -96,7 +96,7 @@ def test_task_rewards_equal_env_rewards_under_mujoco(env_id: str) -> None:
     state = u.get_state()
     actions = rng.uniform(-1.2, 1.2, (2, 6, 2))  # out of range: clipped
     control = u.task.controls(state[None], actions)
-    states = MujocoDynamics(nthread=1).rollout(u.model, state[None], control, frame_skip=u.nstep)
+    states = MujocoDynamics(nthread=1).rollout(u.model, state[None], control, frame_skip=u.frame_skip)
     predicted = u.task.reward(states, u.goal, actions)
     cost, _ = PushProblem(env).evaluate(MujocoDynamics(nthread=1), state, actions)
     stepped = []

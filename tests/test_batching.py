@@ -17,7 +17,7 @@ import torch
 from torch.utils._python_dispatch import TorchDispatchMode
 
 import fignet_gym.envs  # noqa: F401  (registers the environments)
-from fignet_gym.dynamics import STATE_SPEC, FIGNetDynamics
+from fignet_gym.dynamics import STATE_SPEC, FIGNetDynamics, compile_with_history
 from fignet_gym.dynamics import learned as learned_dynamics
 from fignet_gym.mjcf import push_scene_xml
 from fignet_gym.pretrained import load_pretrained
@@ -34,7 +34,7 @@ def push_sim():  # noqa: ANN201
 def _push_history(scene: Scene, lift: float) -> torch.Tensor:
     """``float[3, O, 7]``: the prism at rest on the floor with the tip against it, lifted by
     ``lift`` m (and the tip with it: no contact at all when lifted)."""
-    model = mujoco.MjModel.from_xml_string(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
+    model = compile_with_history(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     pose = torch.tensor(scene.poses_from_data(data), dtype=torch.float32)
@@ -47,7 +47,7 @@ def test_scene_in_a_mixed_batch_equals_the_scene_alone(push_sim) -> None:  # noq
     """A scene with more face edges than nodes batched with one without any contact: each takes
     its own first-layer route (node projections vs gathered latents), and the object MLPs of one
     push scene (3 rows) are as narrow as the BLAS small-matrix kernels."""
-    model = mujoco.MjModel.from_xml_string(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
+    model = compile_with_history(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
     scene = Scene.from_mjmodel(model, push_sim.config.mesh_options)
     touching, flying = _push_history(scene, 0.0), _push_history(scene, 0.5)
     contacts, _ = push_sim.collide(scene, scene.node_positions(touching[-1]))
@@ -65,7 +65,7 @@ def test_scene_in_a_mixed_batch_equals_the_scene_alone(push_sim) -> None:  # noq
 def test_large_batches_and_chunks_equal_the_scene_alone(push_sim, monkeypatch) -> None:  # noqa: ANN001
     """160 push scenes (4800 nodes) cross oneDNN's fused-linear threshold; stepped in chunks of
     3 to 4 scenes (a tiny ``CHUNK_NODES``) they give the same bits as in one product."""
-    model = mujoco.MjModel.from_xml_string(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
+    model = compile_with_history(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
     scene = Scene.from_mjmodel(model, push_sim.config.mesh_options)
     states = (_push_history(scene, 0.0), _push_history(scene, 0.5))
     count = 160
@@ -114,7 +114,7 @@ def test_fused_linear_rounds_like_plain_linear() -> None:
 def test_dynamics_step_many_and_rollout_equal_single_scenes(push_sim) -> None:  # noqa: ANN001
     """The env-facing Dynamics: ``step_many`` on three MjData and a batched ``rollout`` equal
     stepping and rolling out each alone, bit for bit, over 20 steps of contact."""
-    model = mujoco.MjModel.from_xml_string(push_scene_xml("rect1", tip_xy=(-0.07, 0.0)))
+    model = compile_with_history(push_scene_xml("rect1", tip_xy=(-0.07, 0.0)))
     dyn_batch, dyn_single = FIGNetDynamics(push_sim), FIGNetDynamics(push_sim)
     batch = [mujoco.MjData(model) for _ in range(3)]
     singles = [mujoco.MjData(model) for _ in range(3)]
@@ -202,7 +202,7 @@ def test_rollout_steps_move_no_tensor_to_the_host(push_sim, monkeypatch) -> None
     """The GPU path (CUDA is not available here to run it): a learned rollout step, in the
     simulator and inside ``FIGNetDynamics.rollout``, moves no tensor to the host; only a few
     scalar syncs for control flow remain, and their number does not grow with the batch."""
-    model = mujoco.MjModel.from_xml_string(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
+    model = compile_with_history(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
     scene = Scene.from_mjmodel(model, push_sim.config.mesh_options)
     hist = _push_history(scene, 0.0)
     syncs = {}
@@ -240,7 +240,7 @@ def test_analytic_flops_match_torch_flop_counter(push_sim, batch: int) -> None: 
 
     from fignet_gym.tools.bench_limits import network_flops
 
-    model = mujoco.MjModel.from_xml_string(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
+    model = compile_with_history(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
     scene = Scene.from_mjmodel(model, push_sim.config.mesh_options)
     states = (_push_history(scene, 0.0), _push_history(scene, 0.5))
     hist = torch.cat(states[:batch], dim=1)
@@ -256,7 +256,7 @@ def test_bfloat16_mode_runs_a_mixed_batch(push_sim) -> None:  # noqa: ANN001
     """The opt-in bf16 mode through both first-layer routes in one batch: finite, and within the
     per-step error bf16 costs (a few percent of the float32 displacement). Graphs below
     ``LOW_PRECISION_MIN_NODES`` run in float32, bit for bit."""
-    model = mujoco.MjModel.from_xml_string(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
+    model = compile_with_history(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
     scene = Scene.from_mjmodel(model, push_sim.config.mesh_options)
     copies = -(-LOW_PRECISION_MIN_NODES // (2 * scene.num_nodes))  # just enough for bf16
     for count in (copies, 1):
@@ -282,7 +282,7 @@ def test_in_place_residuals_change_nothing_and_keep_gradients(push_sim) -> None:
     """Inference writes each block's residual sums into the dead latents: the network's output
     must equal the autograd path's (new tensors) bit for bit, its input graph must be untouched,
     and training (grad enabled) must still backpropagate through every block."""
-    model = mujoco.MjModel.from_xml_string(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
+    model = compile_with_history(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
     scene = Scene.from_mjmodel(model, push_sim.config.mesh_options)
     hist = torch.cat((_push_history(scene, 0.0), _push_history(scene, 0.5)), dim=1)
     graph = push_sim.normalize(push_sim.build_inputs(scene.repeat(2), hist, hist[-1]).graph)
@@ -302,7 +302,7 @@ def test_in_place_residuals_change_nothing_and_keep_gradients(push_sim) -> None:
 def test_bfloat16_copy_follows_parameter_updates(push_sim) -> None:  # noqa: ANN001
     """The bf16 mode runs a bfloat16 copy of the network; an in-place update (an optimiser
     step) must reach the next step, which must then match float32 with the updated weights."""
-    model = mujoco.MjModel.from_xml_string(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
+    model = compile_with_history(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
     scene = Scene.from_mjmodel(model, push_sim.config.mesh_options)
     copies = -(-LOW_PRECISION_MIN_NODES // scene.num_nodes)
     hist = _push_history(scene, 0.5).repeat(1, copies, 1)

@@ -39,7 +39,8 @@ def test_check_env_and_seeded_episodes(dynamics: str) -> None:
         obs0, _ = env.reset(seed=seed)
         obs1, reward, terminated, truncated, info = env.step(np.array([0.3, -0.2, 0.1, 0.5, -0.5, 0.2]))
         assert terminated and not truncated
-        assert info["is_success"] is info["success"]  # the key run_episode / SB3 read
+        # one key per meaning: SB3's is_success (the former duplicate "success" is gone)
+        assert isinstance(info["is_success"], bool) and "success" not in info
         assert reward == pytest.approx(sum(v for k, v in info.items() if k.startswith("reward_")))
         runs.append(np.concatenate([obs0, obs1]))
     np.testing.assert_array_equal(runs[0], runs[1])
@@ -142,7 +143,7 @@ def test_a_long_toss_accepts_a_checkpoint_dt_stored_to_nine_digits() -> None:
     # 148 learned steps of a dt rounded to 1e-9 s miss 1 s by ~5e-6 steps: still whole steps.
     sim = quiet_simulator("cube-real", dt=round(DATA_DT, 9))
     env = CubeTossEnv(dynamics="fignet", checkpoint=sim)
-    assert env.dynamics.learned_steps(env.model, env.nstep) == 148
+    assert env.dynamics.learned_steps(env.model, env.frame_skip) == 148
 
 
 def test_fitted_mujoco_and_cube_real_land_the_cube_close_together() -> None:
@@ -162,3 +163,30 @@ def test_fitted_mujoco_and_cube_real_land_the_cube_close_together() -> None:
     gap = np.linalg.norm(landed["mujoco"] - landed["fignet"], axis=1)
     assert np.median(travel) > 0.25  # the tosses do go somewhere
     assert np.median(gap) < 0.06 and gap.max() < 0.15, gap
+
+
+def test_cube_task_matches_mujoco_rotations() -> None:
+    """The batched task's heading and release agree with MuJoCo's own rotation matrices."""
+    from fignet_gym.envs.tasks import resting_yaw, wrap_quarter
+
+    env = gym.make(ENV_ID).unwrapped
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    quats = rng.normal(size=(64, 4))
+    quats /= np.linalg.norm(quats, axis=1, keepdims=True)
+    for q, yaw in zip(quats, resting_yaw(quats), strict=True):
+        rot = np.empty(9)
+        mujoco.mju_quat2Mat(rot, q)
+        axes = rot.reshape(3, 3).T
+        side = axes[(int(np.argmax(np.abs(axes[:, 2]))) + 1) % 3]
+        assert yaw == pytest.approx(float(wrap_quarter(np.arctan2(side[1], side[0]))), abs=1e-12)
+    actions = rng.uniform(-1, 1, (8, 6))
+    states = np.repeat(env.get_state()[None], 8, 0)
+    states[:, 4:8] = quats[:8]
+    released = env.task.release(states, actions)
+    for s, a, r in zip(states, actions, released, strict=True):
+        lin, ang = env.task.release_velocity(a)
+        rot = np.empty(9)
+        mujoco.mju_quat2Mat(rot, s[4:8])
+        qv = r[1 + env.model.nq : 1 + env.model.nq + 6]
+        np.testing.assert_allclose(qv, np.concatenate([lin, rot.reshape(3, 3).T @ ang]), atol=1e-12)

@@ -22,20 +22,22 @@ from fignet_gym.dynamics import (
     make_dynamics,
     rollout_loop,
     split_state,
+    userdata_slice,
 )
+from fignet_gym.dynamics.history import compile_with_history
 from fignet_gym.mjcf import TossObject, push_scene_xml, toss_scene_xml
 
 
 @pytest.fixture(scope="module")
 def push_model() -> mujoco.MjModel:
-    return mujoco.MjModel.from_xml_string(push_scene_xml("rect1"))
+    return compile_with_history(push_scene_xml("rect1"))
 
 
 @pytest.fixture(scope="module")
 def toss_model() -> mujoco.MjModel:
     objs = [TossObject("cube", 0.1), TossObject("cylinder", 0.1)]
     poses = np.array([[0, 0, 0.3, 1, 0, 0, 0], [0.5, 0, 0.3, 1, 0, 0, 0]], float)
-    return mujoco.MjModel.from_xml_string(toss_scene_xml(objs, floor_half_size=2.0, poses=poses))
+    return compile_with_history(toss_scene_xml(objs, floor_half_size=2.0, poses=poses))
 
 
 def _tip_path(model: mujoco.MjModel, T: int, speed: float = 0.1, dt: float = 0.02) -> np.ndarray:
@@ -59,9 +61,14 @@ def test_protocol_conformance() -> None:
         make_dynamics(object())  # type: ignore[arg-type]
 
 
+#: MuJoCo's integration state without ``userdata`` (where MujocoDynamics records the pose
+#: history that plain ``mj_step`` does not).
+_INTEGRATION = int(mujoco.mjtState.mjSTATE_INTEGRATION) & ~int(mujoco.mjtState.mjSTATE_USERDATA)
+
+
 def _integration_state(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
-    out = np.zeros(mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_INTEGRATION))
-    mujoco.mj_getState(model, data, out, mujoco.mjtState.mjSTATE_INTEGRATION)
+    out = np.zeros(mujoco.mj_stateSize(model, _INTEGRATION))
+    mujoco.mj_getState(model, data, out, _INTEGRATION)
     return out
 
 
@@ -118,10 +125,10 @@ def test_mujoco_rollout_equals_loop_and_mujoco_rollout(push_model: mujoco.MjMode
         push_model, mujoco.MjData(push_model), split_state(push_model, init)[0], control,
         control_spec=CONTROL_SPEC,
     )
-    # ... its states, with the mocap poses (the control rows) added
-    np.testing.assert_allclose(
-        dyn.rollout(push_model, init, control), join_state(push_model, ref, control), atol=1e-12
-    )
+    # ... its states, with the mocap poses (the control rows) and the pose history added
+    mine = dyn.rollout(push_model, init, control)
+    user = mine[..., userdata_slice(push_model)]
+    np.testing.assert_allclose(mine, join_state(push_model, ref, control, user), atol=1e-12)
     dyn.close()
 
 

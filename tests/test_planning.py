@@ -20,12 +20,24 @@ from fignet_gym.agents import (
     TossProblem,
     run_episode,
 )
-from fignet_gym.dynamics import STATE_SPEC, FIGNetDynamics, MujocoDynamics, rollout_loop
+from fignet_gym.dynamics import (
+    STATE_SPEC,
+    FIGNetDynamics,
+    MujocoDynamics,
+    rollout_loop,
+    userdata_slice,
+)
 
 PUSH_IDS = ["fignet_gym/Push-v0", "fignet_gym/Push-v1"]
 TOSS_FAST = {"settle_steps": 8}
 TINY_CEM = CEMConfig(horizon=3, population=6, elites=2, iterations=2, seed=0)
 TINY_MPPI = MPPIConfig(horizon=3, population=6, iterations=2, seed=0)
+
+
+def _rows(nstep: int, frame_skip: int) -> np.ndarray:
+    """Control rows of a model without mocap bodies (``float[1, T, 0]``): with them ``nstep``
+    counts MuJoCo timesteps (without, it keeps its former meaning for a deprecation period)."""
+    return np.zeros((1, nstep // frame_skip, 0))
 
 
 def running_push(env_id: str, steps: int = 6, **kwargs: Any) -> gym.Env:
@@ -54,7 +66,7 @@ def test_mujoco_rollout_from_a_running_push_env_equals_stepping_it(env_id: str) 
     state = u.get_state()
     actions = np.random.default_rng(2).uniform(-1, 1, (3, 7, 2))
     out = MujocoDynamics(nthread=2).rollout(
-        u.model, state[None], u.task.controls(state[None], actions), frame_skip=u.nstep
+        u.model, state[None], u.task.controls(state[None], actions), frame_skip=u.frame_skip
     )
     stepped = []
     for a in actions[1]:
@@ -68,11 +80,18 @@ def test_mujoco_rollout_from_a_running_toss_env_equals_stepping_it() -> None:
     u = env.unwrapped
     action = np.array([-0.4, 0.7])
     released = u.task.release(u.get_state(), u.released, float(u.release_yaws[u.released]), action)
-    out = MujocoDynamics(nthread=1).rollout(
-        u.model, released[None], None, nstep=u.settle_steps, frame_skip=u.frame_skip
-    )
+    dyn = MujocoDynamics(nthread=1)
+    nstep = u.frame_skip
+    skip = u.settle_frame_skip
+    out = dyn.rollout(u.model, released[None], _rows(nstep, skip), nstep=nstep, frame_skip=skip)
+    whole = dyn.rollout(u.model, released[None], _rows(nstep, nstep), nstep=nstep, frame_skip=nstep)
     env.step(action)
-    np.testing.assert_allclose(out[0, -1], u.get_state(), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(whole[0, -1], u.get_state(), rtol=0, atol=1e-9)
+    # recorded every learned step, the pose history in userdata has finer frames than one step
+    # of the whole settle records; the physics is the same
+    phys = np.ones(len(out[0, -1]), bool)
+    phys[userdata_slice(u.model)] = False
+    np.testing.assert_allclose(out[0, -1, phys], u.get_state()[phys], rtol=0, atol=1e-9)
 
 
 def test_mujoco_rollout_starts_the_tip_where_the_state_has_it() -> None:
@@ -100,12 +119,13 @@ def test_learned_rollout_from_a_running_env_equals_its_own_single_steps(kind: st
         u = env.unwrapped
         state = u.get_state()
         control = u.task.controls(state[None], np.random.default_rng(0).uniform(-1, 1, (2, 4, 2)))
-        frame_skip, nstep = u.nstep, None
+        frame_skip, nstep = u.frame_skip, None
     else:
         env = running_toss(dynamics=dyn)
         u = env.unwrapped
         state = u.task.release(u.get_state(), u.released, 0.3, np.zeros(2))
-        control, frame_skip, nstep = None, u.frame_skip, 4
+        frame_skip, nstep = u.settle_frame_skip, 4 * u.settle_frame_skip
+        control = _rows(nstep, frame_skip)
     out = dyn.rollout(u.model, state[None], control, nstep=nstep, frame_skip=frame_skip)
     ctrl = control[0] if control is not None else np.zeros((4, 0))
     ref = rollout_loop(dyn, u.model, mujoco.MjData(u.model), state, ctrl, frame_skip)
@@ -151,7 +171,7 @@ def test_push_task_is_batched_and_agrees_with_the_env() -> None:
 
 def test_tip_path_clips_actions_and_bounds() -> None:
     u = gym.make("fignet_gym/Push-v1").unwrapped
-    step = u.task.max_speed * u.task.step_time
+    step = u.task.max_speed * u.task.dt
     path = u.task.tip_path(np.array([0.0, 0.0]), np.array([[[2.0, -0.5], [1.0, 0.0]]]))
     np.testing.assert_allclose(path[0], [[step, -0.5 * step], [2 * step, -0.5 * step]])
     edge = u.task.tip_path(np.array([u.task.tip_bound, 0.0]), np.ones((1, 2)))
@@ -314,17 +334,29 @@ def test_plan_command_writes_summary_rows_and_videos(tmp_path: Any, capsys: Any)
     assert len(err) == 1 and err[0].startswith("error: --env: unknown environment")
 
 
+class _NoTaskEnv(gym.Env):
+    """A registered environment with no task to plan (takes ``plan``'s ``dynamics=``)."""
+
+    observation_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+    action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+
+    def __init__(self, **kwargs: Any) -> None:
+        self.kwargs = kwargs
+
+
 @pytest.mark.parametrize("planner", ["cem", "random"])
 def test_plan_command_refuses_an_env_without_a_planning_task(tmp_path: Any, capsys: Any,
                                                              planner: str) -> None:
     from fignet_gym.cli import main
 
+    if "fignet_gym_test/NoTask-v0" not in gym.registry:
+        gym.register("fignet_gym_test/NoTask-v0", entry_point=_NoTaskEnv)
     out = tmp_path / "plan"
-    argv = ["plan", "--env", "fignet_gym/CubeToss-v0", "--planner", planner, "--episodes", "1",
-            "--out", str(out)]
+    argv = ["plan", "--env", "fignet_gym_test/NoTask-v0", "--planner", planner, "--episodes",
+            "1", "--out", str(out)]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("error: --env:") and "Push or Toss" in err[0]
+    assert len(err) == 1 and err[0].startswith("error: --env:") and "no task" in err[0]
     assert not out.exists()
 
 

@@ -1,7 +1,8 @@
 """The swap point: one :class:`Dynamics` protocol mirroring ``mujoco.mj_step`` / ``mujoco.rollout``,
 with MuJoCo (:mod:`.mujoco`) and learned FIGNet (:mod:`.learned`) implementations.
 
-Layers: :mod:`.base` (protocol, shared helpers) <- :mod:`.mujoco`, :mod:`.learned` <- :mod:`.factory`
+Layers: :mod:`.base` (protocol, shared helpers), :mod:`.history` (the pose history in
+``userdata``) <- :mod:`.mujoco`, :mod:`.learned` <- :mod:`.factory`
 (``dynamics="mujoco" | "fignet"``). No module imports one above it.
 """
 
@@ -18,8 +19,10 @@ from fignet_gym.dynamics.base import (
     set_mocap,
     split_state,
     state_offsets,
+    userdata_slice,
 )
 from fignet_gym.dynamics.factory import DYNAMICS_FACTORIES, make_dynamics
+from fignet_gym.dynamics.history import compile_with_history
 from fignet_gym.dynamics.learned import FIGNetDynamics
 from fignet_gym.dynamics.mujoco import MujocoDynamics
 
@@ -27,5 +30,6 @@ __all__ = [
     "CONTROL_SPEC", "DYNAMICS_FACTORIES", "PHYSICS_SPEC", "STATE_SPEC", "DivergenceError",
     "Dynamics", "DynamicsBase",
     "FIGNetDynamics", "MujocoDynamics", "check_rollout_inputs", "make_dynamics", "rollout_loop",
-    "join_state", "set_mocap", "split_state", "state_offsets",
+    "join_state", "set_mocap", "split_state", "state_offsets", "compile_with_history",
+    "userdata_slice",
 ]

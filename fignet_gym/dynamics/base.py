@@ -9,8 +9,10 @@ A :class:`Dynamics` advances ``mujoco.MjData`` exactly where ``mujoco.mj_step`` 
   dynamics runs them as one batched graph).
 * ``rollout(model, initial_state, control, nstep, frame_skip=...)``: shaped like
   ``mujoco.rollout.rollout``: whole states ``float64[B, nstate]`` in (:data:`STATE_SPEC`: full
-  physics *and* mocap poses, so that a rollout starts every body, the pusher included, where the
-  state says), mocap trajectories as control, states ``float64[B, nstep, nstate]`` out.
+  physics, mocap poses *and* ``userdata``, so that a rollout starts every body, the pusher
+  included, where the state says, from the pose history the state's own past left), mocap
+  trajectories as control, ``nstep`` MuJoCo timesteps, one state per ``frame_skip`` of them out:
+  ``float64[B, nstep // frame_skip, nstate]``.
 
 Kinematic bodies are mocap bodies: before a step, set ``data.mocap_pos``/``mocap_quat`` to where
 they should be at the *end* of the step; both implementations move them there linearly from their
@@ -26,6 +28,7 @@ the protocol and the helpers every implementation shares; it imports no implemen
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from typing import Protocol, runtime_checkable
 
@@ -33,14 +36,17 @@ import mujoco
 import numpy as np
 
 #: State layout of :meth:`Dynamics.rollout`, in and out: ``mjSTATE_FULLPHYSICS`` (time, qpos,
-#: qvel, act, plugin) plus every mocap position and quaternion. ``mujoco.mj_getState(model, data,
-#: s, STATE_SPEC)`` reads it from an ``MjData``. Mocap poses are part of the state because with
-#: ``frame_skip > 1`` a mocap body moves linearly from where it is to its next target: a state
-#: without them would start the pusher wherever a scratch ``MjData`` last left it.
+#: qvel, act, plugin) plus every mocap position and quaternion and ``userdata``. ``mujoco.
+#: mj_getState(model, data, s, STATE_SPEC)`` reads it from an ``MjData``. Mocap poses are part of
+#: the state because with ``frame_skip > 1`` a mocap body moves linearly from where it is to its
+#: next target: a state without them would start the pusher wherever a scratch ``MjData`` last
+#: left it. ``userdata`` holds the pose history a learned step needs (:mod:`.history`): without
+#: it, a rollout from a state taken mid-push would start from a made-up history.
 STATE_SPEC = int(
     mujoco.mjtState.mjSTATE_FULLPHYSICS
     | mujoco.mjtState.mjSTATE_MOCAP_POS
     | mujoco.mjtState.mjSTATE_MOCAP_QUAT
+    | mujoco.mjtState.mjSTATE_USERDATA
 )
 #: ``mujoco.rollout``'s own state layout (full physics, no mocap poses).
 PHYSICS_SPEC = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
@@ -98,8 +104,14 @@ class Dynamics(Protocol):
         *,
         frame_skip: int = 1,
     ) -> np.ndarray:
-        """Open-loop rollouts: ``float64[B, nstate]`` states and ``float64[B, nstep, nmocap * 7]``
-        mocap targets (each reached over ``frame_skip`` timesteps) -> ``float64[B, nstep, nstate]``."""
+        """Open-loop rollouts of ``nstep`` MuJoCo timesteps (as ``mujoco.rollout`` counts them),
+        one state recorded every ``frame_skip`` timesteps: ``float64[B, nstate]`` states and
+        ``float64[B, T, nmocap * 7]`` mocap targets (each reached over ``frame_skip`` timesteps)
+        -> ``float64[B, T, nstate]``, ``T = nstep // frame_skip`` (default ``nstep``: ``T``
+        control rows). An empty batch or ``nstep = 0`` gives an empty array of that shape.
+        Deprecated: ``nstep`` as the number of recorded states, still read (with a warning)
+        where it cannot count timesteps, and without control rows when ``frame_skip > 1`` (give
+        ``float[B, T, 0]`` controls to a model without mocap bodies)."""
         ...
 
     def validate(self, model: mujoco.MjModel, nstep: int, scene_type: str = "") -> None:
@@ -110,12 +122,34 @@ class Dynamics(Protocol):
 
 # --------------------------------------------------------------------------- shared helpers
 def check_rollout_inputs(
-    model: mujoco.MjModel, initial_state: np.ndarray, control: np.ndarray | None, nstep: int | None
+    model: mujoco.MjModel, initial_state: np.ndarray, control: np.ndarray | None, nstep: int | None,
+    frame_skip: int = 1,
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Validate and broadcast rollout inputs.
+    """Validate and broadcast rollout inputs (``nstep``: MuJoCo timesteps, a multiple of
+    ``frame_skip``; default: one ``frame_skip`` per control row).
 
-    Returns ``float64[B, nstate]`` states, ``float64[B, T, ncontrol]`` controls and ``T``.
+    Returns ``float64[B, nstate]`` states, ``float64[B, T, ncontrol]`` controls and the number of
+    recorded states ``T = nstep // frame_skip``.
     """
+    if isinstance(frame_skip, bool) or not isinstance(frame_skip, (int, np.integer)) or frame_skip < 1:
+        raise ValueError(f"frame_skip must be an integer >= 1, got {frame_skip!r}")
+    if nstep is not None:
+        if isinstance(nstep, bool) or not isinstance(nstep, (int, np.integer)) or nstep < 0:
+            raise ValueError(f"nstep must be an integer >= 0 (MuJoCo timesteps), got {nstep!r}")
+        rows = None if control is None else np.shape(control)[-2]
+        # The former meaning (recorded states) where it cannot be the new one (nstep not a
+        # multiple of frame_skip, or as many control rows as nstep) and, for a deprecation
+        # period, where nothing tells them apart (no control rows): give control rows, float[B,
+        # T, 0] without mocap bodies, to count timesteps there.
+        if frame_skip > 1 and (nstep % frame_skip or rows == nstep or rows is None):
+            warnings.warn(
+                f"Dynamics.rollout: nstep counts MuJoCo timesteps (as in mujoco.rollout); "
+                f"nstep={nstep} with frame_skip={frame_skip} is read as {nstep} recorded states, "
+                f"the former meaning: pass nstep={nstep * frame_skip} with control rows (float[B, "
+                f"{nstep}, 0] without mocap bodies)", DeprecationWarning,
+                stacklevel=3)
+        else:
+            nstep = nstep // frame_skip
     nstate = mujoco.mj_stateSize(model, STATE_SPEC)
     ncontrol = mujoco.mj_stateSize(model, CONTROL_SPEC)
     state = np.asarray(initial_state, dtype=np.float64)
@@ -124,7 +158,7 @@ def check_rollout_inputs(
     if state.ndim != 2 or state.shape[1] != nstate:
         raise ValueError(
             f"initial_state must be float[B, {nstate}] (STATE_SPEC: mjSTATE_FULLPHYSICS | "
-            f"mjSTATE_MOCAP_POS | mjSTATE_MOCAP_QUAT, from mujoco.mj_getState), "
+            f"mjSTATE_MOCAP_POS | mjSTATE_MOCAP_QUAT | mjSTATE_USERDATA, from mujoco.mj_getState), "
             f"got shape {np.shape(initial_state)}"
         )
     if control is None:
@@ -145,7 +179,9 @@ def check_rollout_inputs(
         )
     nstep = control.shape[1] if nstep is None else int(nstep)
     if control.shape[1] not in (1, nstep):
-        raise ValueError(f"control has {control.shape[1]} steps, nstep is {nstep}")
+        raise ValueError(
+            f"control has {control.shape[1]} rows, nstep / frame_skip is {nstep} recorded states"
+        )
     B = max(state.shape[0], control.shape[0])
     if state.shape[0] not in (1, B) or control.shape[0] not in (1, B):
         raise ValueError(
@@ -165,6 +201,15 @@ def set_mocap(model: mujoco.MjModel, data: mujoco.MjData, control_row: np.ndarra
     data.mocap_quat[:] = control_row[3 * nm :].reshape(nm, 4)
 
 
+def normalize_mocap_quat(quat: np.ndarray) -> np.ndarray:
+    """Quaternions ``float[..., 4]`` normalised as MuJoCo normalises ``mocap_quat``: a (near-)zero
+    one becomes the identity instead of NaN."""
+    quat = np.asarray(quat, dtype=np.float64)
+    norm = np.linalg.norm(quat, axis=-1, keepdims=True)
+    unit = quat / np.where(norm < mujoco.mjMINVAL, 1.0, norm)
+    return np.where(norm < mujoco.mjMINVAL, np.array([1.0, 0.0, 0.0, 0.0]), unit)
+
+
 def state_offsets(model: mujoco.MjModel) -> tuple[int, int, int]:
     """Sizes in :data:`STATE_SPEC`: physics before the mocap poses, mocap poses, plugin state."""
     pre = mujoco.mj_stateSize(
@@ -179,22 +224,34 @@ def state_offsets(model: mujoco.MjModel) -> tuple[int, int, int]:
     return pre, 7 * model.nmocap, mujoco.mj_stateSize(model, int(mujoco.mjtState.mjSTATE_PLUGIN))
 
 
+def userdata_slice(model: mujoco.MjModel) -> slice:
+    """Where ``userdata`` sits in a :data:`STATE_SPEC` vector."""
+    pre, nm7, _ = state_offsets(model)
+    return slice(pre + nm7, pre + nm7 + model.nuserdata)
+
+
 def split_state(model: mujoco.MjModel, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:data:`STATE_SPEC` states ``float64[..., nstate]`` -> ``mjSTATE_FULLPHYSICS`` states
     ``float64[..., nphys]`` and mocap poses ``float64[..., nmocap * 7]`` (positions, then
-    quaternions: the control layout)."""
+    quaternions: the control layout). ``userdata``: ``state[..., userdata_slice(model)]``."""
     pre, nm7, _ = state_offsets(model)
+    user = userdata_slice(model)
     state = np.asarray(state, dtype=np.float64)
-    phys = np.concatenate((state[..., :pre], state[..., pre + nm7 :]), axis=-1)
+    phys = np.concatenate((state[..., :pre], state[..., user.stop :]), axis=-1)
     return phys, state[..., pre : pre + nm7].copy()
 
 
-def join_state(model: mujoco.MjModel, phys: np.ndarray, mocap: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`split_state`: ``float64[..., nphys]`` and ``float64[..., nmocap * 7]``
-    -> ``float64[..., nstate]``."""
+def join_state(
+    model: mujoco.MjModel, phys: np.ndarray, mocap: np.ndarray, userdata: np.ndarray | None = None
+) -> np.ndarray:
+    """Inverse of :func:`split_state`: ``float64[..., nphys]``, ``float64[..., nmocap * 7]`` and
+    ``float64[..., nuserdata]`` (default: zeros) -> ``float64[..., nstate]``."""
     pre, _, _ = state_offsets(model)
-    mocap = np.broadcast_to(mocap, (*phys.shape[:-1], mocap.shape[-1]))
-    return np.concatenate((phys[..., :pre], mocap, phys[..., pre:]), axis=-1)
+    lead = phys.shape[:-1]
+    mocap = np.broadcast_to(mocap, (*lead, mocap.shape[-1]))
+    user = np.zeros((*lead, model.nuserdata)) if userdata is None else userdata
+    user = np.broadcast_to(user, (*lead, model.nuserdata))
+    return np.concatenate((phys[..., :pre], mocap, user, phys[..., pre:]), axis=-1)
 
 
 class DynamicsBase:
@@ -236,8 +293,8 @@ class DynamicsBase:
     ) -> np.ndarray:
         """:meth:`Dynamics.rollout`: the inputs checked and broadcast by
         :func:`check_rollout_inputs`, then :meth:`_rollout` (what a subclass overrides)."""
-        state, control, nstep = check_rollout_inputs(model, initial_state, control, nstep)
-        return self._rollout(model, state, control, nstep, frame_skip)
+        state, control, nrec = check_rollout_inputs(model, initial_state, control, nstep, frame_skip)
+        return self._rollout(model, state, control, nrec, frame_skip)
 
     def _rollout(
         self, model: mujoco.MjModel, state: np.ndarray, control: np.ndarray, nstep: int,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -14,16 +15,24 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from fignet_gym.dynamics import history
 from fignet_gym.dynamics.base import (
     STATE_SPEC,
     DivergenceError,
     DynamicsBase,
+    normalize_mocap_quat,
     set_mocap,
+)
+from fignet_gym.dynamics.learned_ops import (  # noqa: F401  (CHUNK_NODES: re-exported)
+    CHUNK_NODES,
+    batched_step,
+    blend_targets,
+    describe_divergence,
+    integrate_back,
 )
 from fignet_gym.pretrained import load_pretrained
 from fignet_gym.simulator.geometry import (
     ShapeMatchError,
-    axis_angle_to_quat,
     quat_conj,
     quat_mul,
     quat_normalize,
@@ -31,16 +40,6 @@ from fignet_gym.simulator.geometry import (
 )
 from fignet_gym.simulator.model import LearnedSimulator
 from fignet_gym.simulator.scene import ObjectKind, Scene
-
-
-@dataclass
-class _History:
-    """Pose history of one ``MjData`` between calls (checked against ``data`` on the next call)."""
-
-    poses: Tensor  # float[H, O, 7] on the simulator's device
-    qpos: np.ndarray  # what was written, to detect edits
-    qvel: np.ndarray
-    time: float
 
 
 @dataclass(frozen=True)
@@ -55,42 +54,8 @@ class _SceneInfo:
     kin_mocap: np.ndarray  # int[K] their mocap ids
     kin_body: np.ndarray  # int[K] their body ids
     floor_z: float  # lowest static node (m), -inf without static objects
-
-
-#: Nodes per learned step at most: larger batches are stepped in chunks of whole scenes. Per-scene
-#: cost is lowest around 8k to 17k nodes (docs/experiments.md, issue 17); beyond, every latent
-#: outgrows the caches and each new tensor is fresh memory to fault in.
-CHUNK_NODES = 16384
-
-
-def batched_step(sim: LearnedSimulator, scene: Scene, count: int, hist: Tensor, target: Tensor
-                 ) -> Tensor:
-    """One learned step of ``count`` copies of ``scene``, in chunks of at most
-    :data:`CHUNK_NODES` nodes (the scenes are disjoint, and a scene's result does not depend on
-    its batch, so chunking changes no bit).
-
-    ``hist float[H, count*O, 7]``, ``target float[count*O, 7]`` -> ``float[count*O, 7]``.
-    """
-    chunks = -(-count * scene.num_nodes // CHUNK_NODES)
-    if chunks <= 1:
-        return sim.step(scene.repeat(count), hist, target)
-    n_obj, out, start = scene.num_objects, [], 0
-    for i in range(chunks):
-        c = count // chunks + (i < count % chunks)  # sizes differ by at most one
-        rows = slice(start * n_obj, (start + c) * n_obj)
-        out.append(sim.step(scene.repeat(c), hist[:, rows], target[rows]))
-        start += c
-    return torch.cat(out)
-
-
-def _integrate_back(poses: Tensor, lin: Tensor, ang_body: Tensor, k: int, dt: float) -> Tensor:
-    """Poses ``k * dt`` earlier at constant velocity.
-
-    ``poses float[D, 7]``, ``lin float[D, 3]`` (world), ``ang_body float[D, 3]`` -> ``float[D, 7]``.
-    """
-    p = poses[:, :3] - (k * dt) * lin
-    q = quat_normalize(quat_mul(poses[:, 3:], axis_angle_to_quat(-(k * dt) * ang_body)))
-    return torch.cat((p, q), dim=-1)
+    dyn_track: np.ndarray  # int[D] their rows in the userdata history (history.py)
+    kin_track: np.ndarray  # int[K]
 
 
 #: Network precisions of :class:`FIGNetDynamics`.
@@ -100,18 +65,24 @@ PRECISIONS = {"float32": torch.float32, "bfloat16": torch.bfloat16}
 class FIGNetDynamics(DynamicsBase):
     """A learned FIGNet simulator behind MuJoCo's step interface.
 
-    A learned step of ``sim.config.dt`` needs the last ``H = history + 1`` poses. They are kept per
-    ``MjData`` between calls and checked against ``data`` on each call: if ``time`` differs (a
-    reset) every object's history is reseeded, if only some free joints' ``qpos``/``qvel`` were
-    edited (a teleported or released object) only theirs; a reseed assumes constant velocity
-    (``qvel``: linear in the world frame, angular in the body frame) over the past ``H - 1`` steps,
-    so initial velocities are honoured from the first step. Mocap bodies are reseeded at rest at
-    their current pose (``xpos``/``xquat`` as of the last ``mj_forward``).
+    A learned step of ``sim.config.dt`` needs the last ``H = history + 1`` poses. They are part of
+    the state: ``data.userdata`` (:mod:`fignet_gym.dynamics.history`), written after each call and
+    read on the next, so ``mj_getState``/``mj_setState`` and ``rollout`` carry them. A body whose
+    stored history does not fit ``data`` (another ``time``: a reset; frames not ``dt`` apart; its
+    pose edited since: a teleported or released object; fewer than ``H`` frames: a state fresh
+    from a reset or from MuJoCo stepping in other intervals) is reseeded, assuming constant
+    velocity (``qvel``: linear in the world frame, angular in the body frame) over the past
+    ``H - 1`` steps, so initial velocities are honoured from the first step; mocap bodies are
+    reseeded at rest at their current pose (``xpos``/``xquat`` as of the last ``mj_forward``).
+    A model without room in ``userdata`` (``history.compile_with_history``) is reseeded at every
+    call, with a warning. Quaternions are normalised as MuJoCo does (a zero one is the identity).
 
     After the step, ``qpos`` holds the predicted poses (unit quaternions), ``qvel`` the finite
     difference of the last two (linear world / ``dt``; angular in the body frame, the axis-angle of
     ``q_prev^-1 q_next`` / ``dt``), ``time`` advances by ``nstep * timestep``, then ``mj_forward``.
-    When ``nstep`` spans several learned steps the mocap targets are held for all of them.
+    When ``nstep`` spans several learned steps the mocap bodies move linearly from their current
+    poses to their targets over them (quaternions: normalised linear blends), as
+    :class:`~fignet_gym.dynamics.mujoco.MujocoDynamics` moves them over its timesteps.
 
     Divergence (:class:`DivergenceError`): non-finite poses, a dynamic object farther than
     ``max_distance`` from the world origin, lower than ``fall_depth`` below the lowest static node,
@@ -149,7 +120,7 @@ class FIGNetDynamics(DynamicsBase):
         self.fall_depth = float(fall_depth)
         self.max_speed = float(max_speed)
         self._scenes: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-        self._histories: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+        self._warned: weakref.WeakSet = weakref.WeakSet()  # models without history room
 
     # ----------------------------------------------------------------- configuration
     @property
@@ -196,15 +167,14 @@ class FIGNetDynamics(DynamicsBase):
             if bool(static.any()):
                 nodes = scene.node_positions(scene.static_poses)
                 floor_z = float(nodes[static, 2].min())
+            qadr = scene.object_qpos_adr.cpu().numpy()[dyn]
+            kin_mocap = scene.object_mocap.cpu().numpy()[kin]
+            free = list(history.free_qpos_addresses(model))
             info = _SceneInfo(
-                scene,
-                dyn,
-                scene.object_qpos_adr.cpu().numpy()[dyn],
-                scene.object_dof_adr.cpu().numpy()[dyn],
-                kin,
-                scene.object_mocap.cpu().numpy()[kin],
-                scene.object_body.cpu().numpy()[kin],
-                floor_z,
+                scene, dyn, qadr, scene.object_dof_adr.cpu().numpy()[dyn], kin, kin_mocap,
+                scene.object_body.cpu().numpy()[kin], floor_z,
+                np.array([free.index(a) for a in qadr], dtype=np.int64),
+                len(free) + kin_mocap.astype(np.int64),
             )
             self._scenes[model] = info
         return info
@@ -227,34 +197,59 @@ class FIGNetDynamics(DynamicsBase):
         p[:, 3:] = quat_normalize(p[:, 3:])
         return p, f(vel[:, :3]), f(vel[:, 3:])
 
-    def _seed(
-        self, info: _SceneInfo, data: mujoco.MjData, objects: np.ndarray | None, old: Tensor | None
-    ) -> Tensor:
-        """History ``float[H, O, 7]`` reseeded for dynamic ``objects`` (all if ``old`` is None)."""
+    def _history(self, model: mujoco.MjModel, info: _SceneInfo, data: mujoco.MjData,
+                 warn: bool = True) -> Tensor:
+        """History ``float[H, O, 7]`` of ``data``: its ``userdata`` frames where they fit, a
+        constant-velocity reseed (see the class doc) for every other object (``warn``: once per
+        model without room for the history, which loses it between calls)."""
         H = self.simulator.config.history + 1
+        mujoco.mj_normalizeQuat(model, data.qpos)  # as mj_step does: a zero quaternion -> identity
         cur, lin, ang = self._current(info, data)
-        if old is None:
-            hist = cur[None].repeat(H, 1, 1)
-            sel = np.arange(len(info.dyn))
-        else:
-            hist = old.clone()
-            sel = np.flatnonzero(np.isin(info.dyn, objects))
-        idx = torch.as_tensor(info.dyn[sel], device=hist.device)
+        hist = cur[None].repeat(H, 1, 1)
         for k in range(H):
-            hist[H - 1 - k, idx] = _integrate_back(cur[idx], lin[sel], ang[sel], k, self.dt)
+            hist[H - 1 - k, info.dyn] = integrate_back(cur[info.dyn], lin, ang, k, self.dt)
+        if not history.has_history(model):
+            if warn and model not in self._warned:
+                self._warned.add(model)
+                warnings.warn("FIGNetDynamics: the model has no room for the pose history in "
+                              "userdata, so every call restarts it from qpos/qvel; compile it "
+                              "with fignet_gym.dynamics.history.compile_with_history", stacklevel=4)
+            return hist
+        objects = np.concatenate((info.dyn, info.kin))
+        track = np.concatenate((info.dyn_track, info.kin_track))
+        now = np.zeros((history.num_tracked(model), 7))
+        now[track] = cur[objects].double().cpu().numpy()
+        now[info.dyn_track] = data.qpos[info.qadr[:, None] + np.arange(7)]
+        counts = history.valid_counts(model, data.userdata, data.time, self.dt, now, data.qvel)
+        ok = counts[track] >= H
+        if H <= history.FRAMES and ok.any():
+            frames = history.unpack(model, data.userdata)[4]  # [FRAMES, n, 7], newest first
+            stored = torch.as_tensor(frames[:H][::-1].copy(), dtype=hist.dtype, device=hist.device)
+            rows = torch.as_tensor(objects[ok], device=hist.device)
+            hist[:, rows] = stored[:, torch.as_tensor(track[ok], device=hist.device)]
         return hist
 
-    def _history(self, info: _SceneInfo, data: mujoco.MjData) -> Tensor:
-        """The valid history of ``data`` ``float[H, O, 7]``, reseeding what ``data`` contradicts."""
-        h = self._histories.get(data)
-        if h is None or h.time != data.time or h.qpos.shape != data.qpos.shape:
-            return self._seed(info, data, None, None)
-        qa = info.qadr[:, None] + np.arange(7)
-        da = info.dadr[:, None] + np.arange(6)
-        edited = (data.qpos[qa] != h.qpos[qa]).any(1) | (data.qvel[da] != h.qvel[da]).any(1)
-        if edited.any():
-            return self._seed(info, data, info.dyn[edited], h.poses)
-        return h.poses
+    def _userdata(self, model: mujoco.MjModel, info: _SceneInfo, hist: Tensor, times: np.ndarray,
+                  vel: np.ndarray) -> np.ndarray:
+        """``userdata`` history entries ``float64[..., B, history_size]`` of histories ``hist
+        float[..., H, B*O, 7]`` at ``times float[..., B]`` with dynamic objects' velocities ``vel
+        float[..., B, D, 6]`` (what ``qvel`` gets)."""
+        H = hist.shape[-3]
+        B = times.shape[-1]
+        n_obj = info.scene.num_objects
+        lead = hist.shape[:-3]
+        h = hist.reshape(*lead, H, B, n_obj, 7).double().cpu().numpy()
+        objects = np.concatenate((info.dyn, info.kin))
+        track = np.concatenate((info.dyn_track, info.kin_track))
+        n, keep = history.num_tracked(model), min(H, history.FRAMES)
+        frames = np.zeros((*lead, B, history.FRAMES, n, 7))
+        newest_first = np.moveaxis(h[..., ::-1, :, :, :][..., :keep, :, :, :], -4, -3)
+        frames[..., :keep, track, :] = newest_first[..., objects, :]
+        counts = np.zeros(n, dtype=np.int64)
+        counts[track] = keep
+        free = np.zeros((*lead, B, n - model.nmocap, 6))
+        free[..., info.dyn_track, :] = vel
+        return history.pack(model, times, self.dt, counts, free, frames)
 
     def _targets(self, info: _SceneInfo, last: Tensor, pos: np.ndarray, quat: np.ndarray) -> Tensor:
         """Next poses ``float[B*O, 7]`` of ``B`` scenes: ``last`` with kinematic rows replaced by
@@ -314,9 +309,12 @@ class FIGNetDynamics(DynamicsBase):
             target = torch.where(
                 per_obj[:, None] & ~torch.isfinite(target), static_poses, target
             )
+        kin = (info.scene.object_kind == ObjectKind.KINEMATIC).repeat(B)
+        start = hist[-1]
         for k in range(nlearn):
+            step_target = target if k == nlearn - 1 else blend_targets(start, target, kin, (k + 1) / nlearn)
             try:
-                nxt = batched_step(self.simulator, info.scene, B, hist, target)
+                nxt = batched_step(self.simulator, info.scene, B, hist, step_target)
             except (ShapeMatchError, torch.linalg.LinAlgError) as err:
                 reason = f"learned step failed at t={t0[0] + (k + 1) * self.dt:.3f}s: {err}"
                 return hist, {b: bad.get(b, reason) for b in range(B) if b not in dead}
@@ -324,9 +322,10 @@ class FIGNetDynamics(DynamicsBase):
             if bool(sick.any()):
                 for b in torch.nonzero(sick.view(B, n_obj).any(1)).flatten().tolist():
                     if b not in bad and not bool(frozen[b]):
-                        bad[b] = self._describe(
-                            nxt, hist[-1], b, n_obj, info, t0[b] + (k + 1) * self.dt
-                        )
+                        bad[b] = describe_divergence(
+                            nxt[b * n_obj : (b + 1) * n_obj], hist[-1][b * n_obj : (b + 1) * n_obj],
+                            info.dyn, info.scene.object_names, info.floor_z,
+                            t0[b] + (k + 1) * self.dt, self)
                         frozen[b] = True
             if bool(frozen.any()):
                 nxt = torch.where(frozen.repeat_interleave(n_obj)[:, None], hist[-1], nxt)
@@ -341,32 +340,6 @@ class FIGNetDynamics(DynamicsBase):
         bad |= p[:, 2] < floor_z - self.fall_depth
         bad |= (p - cur[:, :3]).norm(dim=-1) > self.max_speed * self.dt
         return bad & dyn
-
-    def _describe(
-        self, nxt: Tensor, cur: Tensor, b: int, n_obj: int, info: _SceneInfo, t: float
-    ) -> str:
-        """Human-readable reason for the first sick dynamic object of scene ``b``."""
-        for o in info.dyn:
-            p, c = nxt[b * n_obj + o], cur[b * n_obj + o]
-            name = info.scene.object_names[o]
-            if not bool(torch.isfinite(p).all()):
-                return f"learned dynamics diverged: object '{name}' is non-finite at t={t:.3f}s"
-            pos = p[:3].tolist()
-            where = f"object '{name}' at ({pos[0]:.3g}, {pos[1]:.3g}, {pos[2]:.3g}) m at t={t:.3f}s"
-            if float(p[:3].norm()) > self.max_distance:
-                limit = f"max_distance={self.max_distance:g} m"
-                return f"learned dynamics diverged: {where} is beyond {limit}"
-            if float(p[2]) < info.floor_z - self.fall_depth:
-                return (
-                    f"learned dynamics diverged: {where} fell {self.fall_depth:g} m below the floor"
-                )
-            speed = float((p[:3] - c[:3]).norm()) / self.dt
-            if speed > self.max_speed:
-                return (
-                    f"learned dynamics diverged: {where} moves at {speed:.3g} m/s "
-                    f"(max_speed={self.max_speed:g})"
-                )
-        return "learned dynamics diverged"
 
     def _pose_velocity(
         self, info: _SceneInfo, hist: Tensor, B: int
@@ -399,28 +372,28 @@ class FIGNetDynamics(DynamicsBase):
         B = len(datas)
         if B == 0:
             return
-        hists = [self._history(info, d) for d in datas]
+        hists = [self._history(model, info, d) for d in datas]
         hist = torch.cat(hists, dim=1)
         m = info.kin_mocap
         pos = np.stack([d.mocap_pos[m] for d in datas])
-        quat = np.stack([d.mocap_quat[m] for d in datas])
+        quat = normalize_mocap_quat(np.stack([d.mocap_quat[m] for d in datas]))
         target = self._targets(info, hist[-1], pos, quat)
         hist, bad = self._advance(info, hist, target, B, nlearn, [d.time for d in datas])
         pose, vel = self._pose_velocity(info, hist, B)
-        n_obj = info.scene.num_objects
         qa = info.qadr[:, None] + np.arange(7)
         da = info.dadr[:, None] + np.arange(6)
+        times = np.array([d.time + nstep * float(model.opt.timestep) for d in datas])
+        user = (self._userdata(model, info, hist, times, vel)
+                if history.has_history(model) else None)
         for b, d in enumerate(datas):
             if b in bad:
-                self._histories.pop(d, None)
                 continue
             d.qpos[qa] = pose[b]
             d.qvel[da] = vel[b]
-            d.time += nstep * float(model.opt.timestep)
+            d.time = times[b]
+            if user is not None:
+                d.userdata[: user.shape[-1]] = user[b]
             mujoco.mj_forward(model, d)
-            # A view into the batch: histories are never modified in place.
-            h = hist[:, b * n_obj : (b + 1) * n_obj]
-            self._histories[d] = _History(h, d.qpos.copy(), d.qvel.copy(), float(d.time))
         if bad:
             order = sorted(bad)
             raise DivergenceError(
@@ -441,21 +414,26 @@ class FIGNetDynamics(DynamicsBase):
         nlearn = self.learned_steps(model, frame_skip)
         info = self._scene_info(model)
         B, nstate = state.shape
+        if B == 0 or nstep == 0:
+            return np.zeros((B, nstep, nstate))
         scratch = mujoco.MjData(model)
-        hists, times = [], []
-        for b in range(B):
-            mujoco.mj_setState(model, scratch, state[b], STATE_SPEC)
+        # A planner's candidates share one start state: its history is built once.
+        uniq, inverse = np.unique(state, axis=0, return_inverse=True)
+        hists = []
+        for row in uniq:
+            mujoco.mj_setState(model, scratch, row, STATE_SPEC)
             scratch.xquat[:] = 0.0  # mocap bodies start at the state's mocap_pos / mocap_quat
-            hists.append(self._seed(info, scratch, None, None))
-            times.append(float(scratch.time))
-        hist = torch.cat(hists, dim=1)
+            hists.append(self._history(model, info, scratch, warn=False))
+        hist = torch.cat([hists[i] for i in inverse.ravel()], dim=1)
+        times = [float(t) for t in state[:, 0]]
         out = np.full((B, nstep, nstate), np.nan)
         dead: set[int] = set()
         qa = info.qadr[:, None] + np.arange(7)
         da = info.dadr[:, None] + np.arange(6)
         nm = model.nmocap
         mocap_pos = control[..., : 3 * nm].reshape(B, nstep, nm, 3)[:, :, info.kin_mocap]
-        mocap_quat = control[..., 3 * nm :].reshape(B, nstep, nm, 4)[:, :, info.kin_mocap]
+        mocap_quat = normalize_mocap_quat(
+            control[..., 3 * nm :].reshape(B, nstep, nm, 4)[:, :, info.kin_mocap])
         # The loop stays on the simulator's device: mocap targets go there once, poses come back
         # once after the last step (no numpy round trip per step; see tests/test_batching.py).
         targets = self._targets_all(info, mocap_pos, mocap_quat, hist.device)  # [T, B*K, 7]
@@ -463,7 +441,7 @@ class FIGNetDynamics(DynamicsBase):
             (np.arange(B)[:, None] * info.scene.num_objects + info.kin[None]).ravel(),
             device=hist.device)
         dead_from: dict[int, int] = {}
-        last, before = [], []
+        last, before, every = [], [], []
         for t in range(nstep):
             target = hist[-1].clone()
             if len(info.kin):
@@ -475,15 +453,22 @@ class FIGNetDynamics(DynamicsBase):
             dead |= set(bad)
             last.append(hist[-1])
             before.append(hist[-2])
+            every.append(hist)
         pose, vel = self._pose_velocity(
             info, torch.stack((torch.cat(before), torch.cat(last))), nstep * B)
         pose, vel = pose.reshape(nstep, B, -1, 7), vel.reshape(nstep, B, -1, 6)
+        step_time = frame_skip * float(model.opt.timestep)
+        times_out = state[None, :, 0] + np.arange(1, nstep + 1)[:, None] * step_time  # [T, B]
+        user = (self._userdata(model, info, torch.stack(every), times_out, vel)
+                if history.has_history(model) else None)
         for b in range(B):
             mujoco.mj_setState(model, scratch, state[b], STATE_SPEC)
             for t in range(dead_from.get(b, nstep)):
                 scratch.qpos[qa] = pose[t, b]
                 scratch.qvel[da] = vel[t, b]
-                scratch.time = state[b, 0] + (t + 1) * frame_skip * float(model.opt.timestep)
+                scratch.time = times_out[t, b]
+                if user is not None:
+                    scratch.userdata[: user.shape[-1]] = user[t, b]
                 set_mocap(model, scratch, control[b, t])
                 mujoco.mj_getState(model, scratch, out[b, t], STATE_SPEC)
         return out
@@ -498,5 +483,7 @@ class FIGNetDynamics(DynamicsBase):
         return torch.cat((tgt[..., :3], quat_normalize(tgt[..., 3:])), -1)
 
     def forget(self, data: mujoco.MjData) -> None:
-        """Drop the stored history of ``data`` (the next step reseeds it from ``qpos``/``qvel``)."""
-        self._histories.pop(data, None)
+        """Drop the pose history of ``data`` (its ``userdata`` frames): the next step reseeds it
+        from ``qpos``/``qvel``. ``mj_resetData`` does the same."""
+        if history.has_history(data.model):
+            data.userdata[: history.history_size(data.model)] = 0.0

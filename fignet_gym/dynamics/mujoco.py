@@ -13,6 +13,16 @@ from fignet_gym.dynamics.base import (
     DynamicsBase,
     join_state,
     split_state,
+    userdata_slice,
+)
+from fignet_gym.dynamics.history import (
+    current_poses,
+    has_history,
+    normalized_qpos,
+    num_tracked,
+    record,
+    record_step,
+    tracked_poses,
 )
 
 _WARNINGS = (
@@ -31,7 +41,9 @@ class MujocoDynamics(DynamicsBase):
     mocap bodies' current poses (``xpos``/``xquat``) to ``mocap_pos``/``mocap_quat``, as the
     training data's pusher does: holding a target for all substeps would make the pusher jump and
     kick the object (a 0.1 m/s push launched it at 0.7 m/s). With targets at the current poses,
-    ``step`` is exactly ``mj_step``.
+    ``step`` is exactly ``mj_step``. On a model with room for it (:mod:`.history`), each call
+    also records the poses before and after it in ``data.userdata`` (frames ``nstep`` timesteps
+    apart), so that a learned model planning from this state sees the trajectory that led to it.
 
     Args:
         nthread: threads of :meth:`rollout` (default: the CPU count).
@@ -46,10 +58,16 @@ class MujocoDynamics(DynamicsBase):
 
     def step(self, model: mujoco.MjModel, data: mujoco.MjData, nstep: int = 1) -> None:
         """``mujoco.mj_step(model, data, nstep)``; :class:`DivergenceError` if MuJoCo blew up."""
-        before = [data.warning[w].number for w in _WARNINGS]
+        before_warn = [data.warning[w].number for w in _WARNINGS]
         bodies = mocap_bodies(model)
         start = np.concatenate((data.xpos[bodies].ravel(), data.xquat[bodies].ravel()))
         target = np.concatenate((data.mocap_pos.ravel(), data.mocap_quat.ravel()))
+        if nstep < 1:
+            raise ValueError(f"nstep must be >= 1, got {nstep}")
+        t0, before = data.time, None
+        if has_history(model):
+            before = current_poses(model, data.qpos, data.xpos[bodies], data.xquat[bodies])
+            vel0 = data.qvel.copy()
         if nstep == 1 or np.array_equal(start, target):
             mujoco.mj_step(model, data, nstep)
         else:
@@ -59,12 +77,17 @@ class MujocoDynamics(DynamicsBase):
                 data.mocap_quat[:] = row[3 * model.nmocap :].reshape(-1, 4)
                 mujoco.mj_step(model, data, 1)
         after = [data.warning[w].number for w in _WARNINGS]
-        if after != before:
-            names = [w.name for w, a, b in zip(_WARNINGS, after, before, strict=True) if a != b]
+        if after != before_warn:
+            names = [w.name for w, a, b in zip(_WARNINGS, after, before_warn, strict=True) if a != b]
             raise DivergenceError(
                 f"MuJoCo reported {', '.join(names)} at t={data.time:.3f}s "
                 "(it reset the simulation)"
             )
+        if before is not None:
+            # mj_step normalised qpos already
+            now = current_poses(model, data.qpos, data.mocap_pos, data.mocap_quat, normalize=False)
+            record_step(model, data.userdata, before, now, t0, data.time,
+                        nstep * float(model.opt.timestep), vel0, data.qvel)
 
     def _rollout(
         self, model: mujoco.MjModel, state: np.ndarray, control: np.ndarray, nstep: int,
@@ -79,6 +102,9 @@ class MujocoDynamics(DynamicsBase):
         """
         if frame_skip < 1:
             raise ValueError(f"frame_skip must be >= 1, got {frame_skip}")
+        B, T = control.shape[:2]
+        if B == 0 or T == 0:  # mujoco.rollout crashes on an empty batch
+            return np.zeros((B, T, state.shape[1]))
         from mujoco import rollout as mj_rollout
 
         if self._pool is None:
@@ -95,7 +121,19 @@ class MujocoDynamics(DynamicsBase):
         out, _ = self._pool.rollout(
             model, datas, phys, fine, control_spec=CONTROL_SPEC, nstep=nstep * frame_skip
         )
-        return join_state(model, out[:, frame_skip - 1 :: frame_skip], control)
+        out = out[:, frame_skip - 1 :: frame_skip]
+        user = np.repeat(state[:, None, userdata_slice(model)], T, axis=1)
+        if has_history(model):
+            n = num_tracked(model)
+            before = tracked_poses(model, normalized_qpos(model, phys[:, 1 : 1 + model.nq]),
+                                   start).reshape(B, n, 7)
+            after = tracked_poses(model, out[..., 1:], control).reshape(B, T, n, 7)
+            hist = record(model, state[:, userdata_slice(model)], before, after, phys[:, 0],
+                          out[..., 0], frame_skip * float(model.opt.timestep),
+                          phys[:, 1 + model.nq : 1 + model.nq + model.nv],
+                          out[..., 1 + model.nq : 1 + model.nq + model.nv])
+            user[..., : hist.shape[-1]] = hist
+        return join_state(model, out, control, user)
 
     def close(self) -> None:
         """Stop the rollout thread pool."""

@@ -167,6 +167,11 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {"episodes": len(rows)}
     if rows and "is_success" in rows[0]:
         out["success_rate"] = float(np.mean([r["is_success"] for r in rows]))
+    if rows and "distance" in rows[0]:  # a toss's landing error
+        out["median_distance"] = float(np.median([r["distance"] for r in rows]))
+        out["mean_distance"] = float(np.mean([r["distance"] for r in rows]))
+        out["median_abs_yaw_error_deg"] = float(np.median([abs(r["yaw_error_deg"]) for r in rows]))
+    if rows and "position_error" in rows[0]:
         out["median_position_error"] = float(np.median([r["position_error"] for r in rows]))
         out["median_orientation_error"] = float(np.median([r["orientation_error"] for r in rows]))
     if rows and "num_in_target" in rows[0]:
@@ -183,13 +188,18 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 def print_table(label: str, rows: list[dict[str, Any]], summary: dict[str, Any]) -> None:
     """Per-episode rows, then the summary line."""
-    push = "is_success" in (rows[0] if rows else {})
-    head = "success  pos. err (mm)  heading err (rad)" if push else "in target"
+    push = "position_error" in (rows[0] if rows else {})
+    cube = "distance" in (rows[0] if rows else {})
+    head = ("success  pos. err (mm)  heading err (rad)" if push else
+            "success  landing err (mm)  yaw err (deg)" if cube else "in target")
     print(f"\n{label}\n{'seed':>6s}  {'steps':>5s}  {head}  {'s/action (cpu)':>14s}")
     for r in rows:
         if push:
             body = (f"{str(r['is_success']):>7s}  {r['position_error'] * 1000:13.1f}  "
                     f"{r['orientation_error']:17.3f}")
+        elif cube:
+            body = (f"{str(r['is_success']):>7s}  {r['distance'] * 1000:17.1f}  "
+                    f"{r['yaw_error_deg']:13.1f}")
         elif "num_in_target" in r:
             body = f"{r['num_in_target']:9d}"
         else:
@@ -201,6 +211,12 @@ def print_table(label: str, rows: list[dict[str, Any]], summary: dict[str, Any])
               f"{summary['median_position_error'] * 1000:.1f} mm / "
               f"{summary['median_orientation_error']:.3f} rad, "
               f"{spa.get('cpu', 0):.3f} CPU-s ({spa.get('wall', 0):.3f} s wall) per action")
+    elif cube:
+        print(f"success {summary['success_rate']:.0%} of {summary['episodes']}, landing error "
+              f"median {summary['median_distance'] * 1000:.1f} mm (mean "
+              f"{summary['mean_distance'] * 1000:.1f}), yaw error median "
+              f"{summary['median_abs_yaw_error_deg']:.1f} deg, {spa.get('cpu', 0):.3f} CPU-s per "
+              f"action")
     elif "mean_in_target" in summary:
         print(f"mean objects in target {summary['mean_in_target']:.2f} over {summary['episodes']}"
               f" episodes, {spa.get('cpu', 0):.3f} CPU-s per action")
@@ -263,8 +279,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     import fignet_gym.envs  # noqa: F401  (registers the environments)
     from fignet_gym.agents import IdleAgent, RandomAgent, make_planner
     from fignet_gym.dynamics import MujocoDynamics, make_dynamics
-    from fignet_gym.envs.push import PushEnv
-    from fignet_gym.envs.toss import TossEnv
+    from fignet_gym.envs.tasks import Task
 
     check_arguments(args)
     torch.set_num_threads(args.threads)
@@ -277,9 +292,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     env_kwargs = {"dynamics": args.act_dynamics}
     render = {"render_mode": "rgb_array", "width": 320, "height": 320} if args.videos else {}
     env = gym.make(args.env, **render, **env_kwargs)
-    if not isinstance(env.unwrapped, (PushEnv, TossEnv)):
-        raise PlanError(f"--env: {args.env} is not a Push or Toss environment (plan has no task "
-                        f"for {type(env.unwrapped).__name__})")
+    if not isinstance(getattr(env.unwrapped, "task", None), Task):
+        raise PlanError(f"--env: {args.env} exposes no task to plan (env.task: a "
+                        f"fignet_gym.envs.tasks.Task); {type(env.unwrapped).__name__} has none")
     scene = env.unwrapped.scene_type
     if args.planner in BASELINES:
         agent: Any = (IdleAgent if args.planner == "idle" else RandomAgent)(seed=args.seed)
@@ -292,8 +307,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 dyn = MujocoDynamics(nthread=args.threads)
             else:
                 dyn = make_dynamics("fignet", args.checkpoint, scene)
+            # An env whose scene depends on its dynamics (CubeToss: fitted MuJoCo parameters,
+            # the learned model's own nominal scene) plans on the planning dynamics' scene.
+            plan_model = None
+            if args.dynamics != args.act_dynamics:
+                own = gym.make(args.env, dynamics="mujoco" if args.dynamics == "mujoco" else dyn)
+                plan_model = own.unwrapped.model
             agent = make_planner(
-                args.planner, dyn, scene, env=env, horizon=args.horizon,
+                args.planner, dyn, scene, env=env, model=plan_model, horizon=args.horizon,
                 population=args.population, iterations=args.iterations,
                 replan_every=args.replan_every, **({"seed": args.seed} if args.seed else {}),
             )

@@ -153,8 +153,8 @@ class Replay:
             m = mocap[o]
             control[:, 3 * m:3 * m + 3] = poses[k + 1:T, o, :3]
             control[:, 3 * nm + 4 * m:3 * nm + 4 * m + 4] = poses[k + 1:T, o, 3:]
-        states = dynamics.rollout(model, state[None], control[None] if nm else None,
-                                  T - 1 - k, frame_skip=self.substeps)[0]
+        states = dynamics.rollout(model, state[None], control[None],  # float[1, T, 0] without mocap
+                                  (T - 1 - k) * self.substeps, frame_skip=self.substeps)[0]
         for o in dyn:
             out[k + 1:, o] = states[:, 1 + qadr[o]:1 + qadr[o] + 7]
         for o in kin:
