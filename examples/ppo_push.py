@@ -18,8 +18,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-from fignet_gym.agents.ppo import PPOConfig
-from fignet_gym.agents.ppo_run import RunConfig, run_ppo, transfer_table
+from fignet_gym.agents import PPOConfig, RunConfig, run_ppo, transfer_table
 
 
 @dataclass(frozen=True)
