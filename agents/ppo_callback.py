@@ -14,6 +14,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from fignet_gym.agents.ppo_config import RunConfig
 from fignet_gym.agents.ppo_eval import evaluate_both, summary
+from fignet_gym.agents.ppo_features import ObservationTransform
 from fignet_gym.agents.ppo_logging import CSVRows, pending_records
 from fignet_gym.agents.ppo_policy import NormalizedPolicy
 from fignet_gym.agents.ppo_rng import rng_state
@@ -50,12 +51,15 @@ class RunCallback(BaseCallback):
         stop_at: raise :class:`Stop` (as a kill would, after the checkpoint) at the first rollout
             start at or after this step; for tests.
         progress: show a tqdm bar.
+        transform: the observation transform the training env applies (evaluation applies it too).
         cpu_before, wall_before: seconds spent by earlier processes of a resumed run.
     """
 
     def __init__(self, root: Path, cfg: RunConfig, evals: CSVRows, stop_at: int | None,
-                 progress: bool, cpu_before: float = 0.0, wall_before: float = 0.0) -> None:
+                 progress: bool, transform: ObservationTransform | None = None,
+                 cpu_before: float = 0.0, wall_before: float = 0.0) -> None:
         super().__init__()
+        self.transform = transform
         self.root, self.cfg, self.evals = root, cfg, evals
         self.stop_at = stop_at
         self.progress = progress
@@ -97,7 +101,8 @@ class RunCallback(BaseCallback):
     def evaluate(self, t: int) -> dict[str, dict[str, Any]]:
         """Evaluate the current policy on both dynamics; log ``eval/<dynamics>/*`` at step ``t``."""
         vec = self.model.get_env()
-        policy = NormalizedPolicy(self.model, vec if isinstance(vec, VecNormalize) else None)
+        policy = NormalizedPolicy(self.model, vec if isinstance(vec, VecNormalize) else None,
+                                  self.transform)
         # Evaluation steps its own envs: the training normaliser's statistics are only read.
         reports = evaluate_both(self.cfg, policy, self.cfg.eval_episodes)
         row = {}

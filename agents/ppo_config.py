@@ -27,6 +27,10 @@ MAX_SEED = 2**32 - 1
 LOG_STD_RANGE = (-20.0, 2.0)
 #: Largest hidden layer: a policy for a 2-D action needs nothing near this.
 MAX_LAYER = 8192
+#: Observation kinds a run may give its policy (:mod:`~fignet_gym.agents.ppo_features`).
+OBSERVATIONS = ("env", "push-features")
+#: Largest progress-shaping weight: beyond it the shaping dwarfs the env's own reward.
+MAX_SHAPING = 100.0
 
 
 class ConfigError(ValueError):
@@ -141,6 +145,11 @@ class RunConfig:
         eval_episodes: episodes per dynamics at each periodic evaluation.
         final_episodes: episodes per dynamics of the final evaluation (the transfer table).
         checkpoint_every: save a resumable checkpoint every this many environment steps.
+        observation: what the policy sees: ``"env"`` (the env's observation) or
+            ``"push-features"`` (it and the pushing geometry,
+            :func:`~fignet_gym.agents.ppo_features.push_features`).
+        shaping: weight of the potential-based progress reward added during training
+            (:class:`~fignet_gym.agents.ppo_features.ProgressShaping`; 0: none).
     """
 
     env_id: str = PUSH_ID
@@ -154,8 +163,14 @@ class RunConfig:
     eval_episodes: int = 32
     final_episodes: int = 50
     checkpoint_every: int = 20_000
+    observation: str = "env"
+    shaping: float = 0.0
 
     def __post_init__(self) -> None:
+        if self.observation not in OBSERVATIONS:
+            raise ConfigError("observation", f"must be one of {OBSERVATIONS}, got {self.observation!r}")
+        if not (_finite(self.shaping) and 0 <= self.shaping <= MAX_SHAPING):
+            raise ConfigError("shaping", f"must be a number in [0, {MAX_SHAPING:g}], got {self.shaping!r}")
         if self.dynamics not in DYNAMICS:
             raise ConfigError("dynamics", f"must be one of {DYNAMICS}, got {self.dynamics!r}")
         if not (_integer(self.eval_every) and self.eval_every >= 0):

@@ -34,6 +34,7 @@ from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from fignet_gym.agents.ppo_callback import RunCallback, Stop
 from fignet_gym.agents.ppo_config import RunConfig
 from fignet_gym.agents.ppo_eval import evaluate_both, run_env_kwargs
+from fignet_gym.agents.ppo_features import ObservationTransform, ProgressShaping, TransformedObservations
 from fignet_gym.agents.ppo_logging import CSVRows, make_logger, restore_records
 from fignet_gym.agents.ppo_policy import load_run_policy
 from fignet_gym.agents.ppo_rng import adapter, set_rng_state
@@ -90,12 +91,37 @@ def check_env_id(env_id: str) -> None:
         raise RunError(f"--env {env_id!r} is not a fignet_gym environment (one of: {', '.join(ours)})")
 
 
-def _train_env(cfg: RunConfig) -> VecNormalize:
-    vec = make_sb3_vec_env(cfg.env_id, cfg.ppo.num_envs, **run_env_kwargs(cfg, cfg.dynamics))
-    # VecMonitor below the normaliser: the logged episode returns are the env's own reward.
-    return VecNormalize(
-        VecMonitor(vec), norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, gamma=cfg.ppo.gamma
-    )
+def check_features(cfg: RunConfig) -> None:
+    """``RunError`` unless the env has what ``cfg.observation`` and ``cfg.shaping`` read (a push
+    task): checked on a MuJoCo instance before anything is written."""
+    if cfg.observation == "env" and not cfg.shaping:
+        return
+    env = gym.make(cfg.env_id, **{**cfg.env_kwargs, "dynamics": "mujoco"})
+    try:
+        task = getattr(env.unwrapped, "task", None)
+        if not all(hasattr(task, a) for a in ("outline", "position_weight", "orientation_weight")):
+            raise RunError(f"--observation {cfg.observation} and --shaping need a push env, "
+                           f"not {cfg.env_id}")
+    finally:
+        env.close()
+
+
+def _train_env(cfg: RunConfig) -> tuple[VecNormalize, ObservationTransform]:
+    """The training env and the observation transform it applies (the policy's, too)."""
+    base = make_sb3_vec_env(cfg.env_id, cfg.ppo.num_envs, **run_env_kwargs(cfg, cfg.dynamics))
+    first = base.venv.envs[0]
+    transform = ObservationTransform.of_env(cfg.observation, first)
+    # VecMonitor right above the env: the logged episode returns are the env's own reward,
+    # whatever shaping and normalisation PPO trains on above it.
+    vec: Any = VecMonitor(base)
+    if cfg.shaping:
+        task = first.task
+        vec = ProgressShaping(vec, cfg.ppo.gamma, cfg.shaping, task.position_weight,
+                              task.orientation_weight)
+    if cfg.observation != "env":
+        vec = TransformedObservations(vec, transform)
+    norm = VecNormalize(vec, norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, gamma=cfg.ppo.gamma)
+    return norm, transform
 
 
 def _new_model(cfg: RunConfig, vec: VecNormalize) -> RunPPO:
@@ -163,13 +189,14 @@ def run_ppo(
     """
     cfg = cfg if cfg is not None else RunConfig()
     check_env_id(cfg.env_id)
+    check_features(cfg)
     root = Path(out)
     cfg, resuming = start(root, cfg, resume, force)
 
     learned = cfg.dynamics != "mujoco"
     threads = cfg.ppo.torch_threads if cfg.ppo.torch_threads is not None else (1 if learned else None)
     with torch_threads(threads):
-        vec = _train_env(cfg)
+        vec, transform = _train_env(cfg)
         state: dict[str, Any] = {}
         if resuming:
             state = read_state(root) or {}
@@ -181,7 +208,7 @@ def run_ppo(
         model.set_logger(logger)
         restore_records(logger, state.get("pending_log", {"values": {}, "counts": {}, "excluded": {}}))
         evals = CSVRows(root / "eval.csv", keep_until=done if resuming else None)
-        cb = RunCallback(root, cfg, evals, stop_at, progress,
+        cb = RunCallback(root, cfg, evals, stop_at, progress, transform=transform,
                          cpu_before=float(state.get("cpu_seconds", 0.0)),
                          wall_before=float(state.get("wall_seconds", 0.0)))
         remaining = cfg.ppo.total_timesteps - model.num_timesteps

@@ -19,7 +19,7 @@ OPTIONS = {
     "net_arch": "--net-arch", "log_std_init": "--log-std-init", "use_sde": "--use-sde",
     "seed": "--seed", "dynamics": "--dynamics", "eval_every": "--eval-every",
     "eval_episodes": "--eval-episodes", "final_episodes": "--final-episodes",
-    "checkpoint_every": "--checkpoint-every",
+    "checkpoint_every": "--checkpoint-every", "observation": "--observation", "shaping": "--shaping",
 }
 
 
@@ -61,6 +61,8 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
             eval_episodes=args.eval_episodes,
             final_episodes=args.final_episodes,
             checkpoint_every=args.checkpoint_every,
+            observation=args.observation,
+            shaping=args.shaping,
         )
     except ConfigError as err:
         raise ValueError(f"{OPTIONS.get(err.setting, err.setting)} {err.detail}") from None
