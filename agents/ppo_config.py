@@ -31,6 +31,8 @@ MAX_LAYER = 8192
 OBSERVATIONS = ("env", "push-features")
 #: Largest progress-shaping weight: beyond it the shaping dwarfs the env's own reward.
 MAX_SHAPING = 100.0
+#: Largest success bonus: a few hundred steps of the env's largest per-step cost.
+MAX_BONUS = 1000.0
 
 
 class ConfigError(ValueError):
@@ -150,6 +152,9 @@ class RunConfig:
             :func:`~fignet_gym.agents.ppo_features.push_features`).
         shaping: weight of the potential-based progress reward added during training
             (:class:`~fignet_gym.agents.ppo_features.ProgressShaping`; 0: none).
+        success_bonus: extra reward of a successful step during training
+            (:class:`~fignet_gym.agents.ppo_features.SuccessBonus`; 0: none). Evaluation and the
+            logged returns always use the env's own reward.
     """
 
     env_id: str = PUSH_ID
@@ -165,12 +170,16 @@ class RunConfig:
     checkpoint_every: int = 20_000
     observation: str = "env"
     shaping: float = 0.0
+    success_bonus: float = 0.0
 
     def __post_init__(self) -> None:
         if self.observation not in OBSERVATIONS:
             raise ConfigError("observation", f"must be one of {OBSERVATIONS}, got {self.observation!r}")
         if not (_finite(self.shaping) and 0 <= self.shaping <= MAX_SHAPING):
             raise ConfigError("shaping", f"must be a number in [0, {MAX_SHAPING:g}], got {self.shaping!r}")
+        if not (_finite(self.success_bonus) and 0 <= self.success_bonus <= MAX_BONUS):
+            raise ConfigError("success_bonus",
+                              f"must be a number in [0, {MAX_BONUS:g}], got {self.success_bonus!r}")
         if self.dynamics not in DYNAMICS:
             raise ConfigError("dynamics", f"must be one of {DYNAMICS}, got {self.dynamics!r}")
         if not (_integer(self.eval_every) and self.eval_every >= 0):

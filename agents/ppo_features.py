@@ -11,6 +11,9 @@ The env stays the benchmark the planners are measured on; these are the policy's
   the env's own position and heading cost, a training-time reward for progress towards the goal
   that keeps the optimal policy (Ng, Harada and Russell, 1999). Episode returns are still logged
   in the env's reward (``VecMonitor`` sits below it).
+* :class:`SuccessBonus`: extra reward on the step that succeeds, during training only. The
+  env's dense cost ranks "close" above "far" but barely "inside the tolerance" above "close",
+  which is what success is measured by.
 """
 
 from __future__ import annotations
@@ -188,3 +191,25 @@ class ProgressShaping(VecEnvWrapper):
         shaped = rewards + self.weight * (self.gamma * nxt - self.phi)
         self.phi = after  # finished sub-environments were reset: their new episode's potential
         return obs, shaped.astype(np.float32), dones, infos
+
+
+class SuccessBonus(VecEnvWrapper):
+    """Adds ``bonus`` to the reward of every step whose ``info["is_success"]`` is true.
+
+    Args:
+        venv: the env's SB3 view (its infos carry ``is_success``). bonus: the extra reward.
+    """
+
+    def __init__(self, venv: VecEnv, bonus: float) -> None:
+        super().__init__(venv)
+        self.bonus = float(bonus)
+
+    def reset(self) -> np.ndarray:
+        """Reset every sub-environment."""
+        return self.venv.reset()
+
+    def step_wait(self) -> VecEnvStepReturn:
+        """Step; rewards ``float32[N]`` with the bonus on successful steps."""
+        obs, rewards, dones, infos = self.venv.step_wait()
+        success = np.array([bool(i.get("is_success", False)) for i in infos])
+        return obs, (rewards + self.bonus * success).astype(np.float32), dones, infos

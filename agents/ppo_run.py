@@ -34,7 +34,12 @@ from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from fignet_gym.agents.ppo_callback import RunCallback, Stop
 from fignet_gym.agents.ppo_config import RunConfig
 from fignet_gym.agents.ppo_eval import evaluate_both, run_env_kwargs
-from fignet_gym.agents.ppo_features import ObservationTransform, ProgressShaping, TransformedObservations
+from fignet_gym.agents.ppo_features import (
+    ObservationTransform,
+    ProgressShaping,
+    SuccessBonus,
+    TransformedObservations,
+)
 from fignet_gym.agents.ppo_logging import CSVRows, make_logger, restore_records
 from fignet_gym.agents.ppo_policy import load_run_policy
 from fignet_gym.agents.ppo_rng import adapter, set_rng_state
@@ -118,6 +123,8 @@ def _train_env(cfg: RunConfig) -> tuple[VecNormalize, ObservationTransform]:
         task = first.task
         vec = ProgressShaping(vec, cfg.ppo.gamma, cfg.shaping, task.position_weight,
                               task.orientation_weight)
+    if cfg.success_bonus:
+        vec = SuccessBonus(vec, cfg.success_bonus)
     if cfg.observation != "env":
         vec = TransformedObservations(vec, transform)
     norm = VecNormalize(vec, norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, gamma=cfg.ppo.gamma)

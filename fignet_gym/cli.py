@@ -254,6 +254,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="what the policy sees: the env's observation, or it and the pushing geometry")
     o.add_argument("--shaping", type=float, default=0.0,
                    help="weight of the potential-based progress reward during training (0: none)")
+    o.add_argument("--success-bonus", type=float, default=0.0,
+                   help="extra reward of a successful step during training (0: none)")
     o.add_argument("--eval-every", type=int, default=25_000,
                    help="evaluate on both dynamics every N steps (0: never)")
     o.add_argument("--eval-episodes", type=int, default=32, help="episodes per periodic evaluation")

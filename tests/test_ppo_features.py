@@ -111,3 +111,22 @@ def test_run_with_features_and_shaping_saves_a_policy_that_acts_on_raw_observati
     again = evaluate_policy_on("mujoco", policy, n_episodes=2, seed=EVAL_SEED, env_id=PUSH)
     # Reported returns are the env's own reward (no shaping), the same episodes as the run's.
     assert again["episode_returns"] == result["eval"]["mujoco"]["episode_returns"]
+
+
+def test_success_bonus_is_added_on_successful_steps_only() -> None:
+    """A run of the env from a hand-made near-goal state: the bonus lands on the success step."""
+    from fignet_gym.agents.ppo_features import SuccessBonus
+
+    vec = make_sb3_vec_env(PUSH, 2)
+    bonus = SuccessBonus(vec, 5.0)
+    bonus.seed(0)
+    bonus.reset()
+    u = vec.venv.envs[0]
+    u.goal = np.array([*u.data.qpos[u._qadr : u._qadr + 2], u.goal[2]])  # position reached
+    u.goal[2] = float(np.arctan2(*u.observe()[2:4][::-1]))  # heading reached
+    bonus.step_async(np.zeros((2, 2), dtype=np.float32))
+    _, rewards, dones, infos = bonus.step_wait()
+    env_r = [sum(v for k, v in i.items() if k.startswith("reward_")) for i in infos]
+    assert infos[0]["is_success"] and dones[0] and not infos[1]["is_success"]
+    assert rewards[0] == pytest.approx(env_r[0] + 5.0, abs=1e-5)
+    assert rewards[1] == pytest.approx(env_r[1], abs=1e-5)

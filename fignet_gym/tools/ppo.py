@@ -20,6 +20,7 @@ OPTIONS = {
     "seed": "--seed", "dynamics": "--dynamics", "eval_every": "--eval-every",
     "eval_episodes": "--eval-episodes", "final_episodes": "--final-episodes",
     "checkpoint_every": "--checkpoint-every", "observation": "--observation", "shaping": "--shaping",
+    "success_bonus": "--success-bonus",
 }
 
 
@@ -63,6 +64,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
             checkpoint_every=args.checkpoint_every,
             observation=args.observation,
             shaping=args.shaping,
+            success_bonus=args.success_bonus,
         )
     except ConfigError as err:
         raise ValueError(f"{OPTIONS.get(err.setting, err.setting)} {err.detail}") from None
