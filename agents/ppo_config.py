@@ -67,6 +67,7 @@ PPO_RANGES: dict[str, tuple[Any, str]] = {
     "log_std_init": (lambda x: _finite(x) and LOG_STD_RANGE[0] <= x <= LOG_STD_RANGE[1],
                      f"a number in [{LOG_STD_RANGE[0]:g}, {LOG_STD_RANGE[1]:g}]"),
     "use_sde": (lambda x: isinstance(x, bool), "true or false"),
+    "sde_sample_freq": (lambda x: _integer(x) and x >= -1 and x != 0, "-1 or an integer >= 1"),
     "seed": (lambda x: _integer(x) and 0 <= x <= MAX_SEED, f"an integer in [0, {MAX_SEED}]"),
     "torch_threads": (lambda x: x is None or (_integer(x) and x >= 1), "None or an integer >= 1"),
 }
@@ -88,6 +89,8 @@ class PPOConfig:
         net_arch: hidden layer sizes of the policy and value MLPs.
         log_std_init: initial log standard deviation of the Gaussian policy's actions.
         use_sde: state-dependent exploration noise (gSDE) instead of independent Gaussian noise.
+        sde_sample_freq: with gSDE, draw new noise weights every this many steps (-1: once per
+            rollout).
         seed: of PPO and the environments.
         torch_threads: torch threads during training; ``None``: 1 when the dynamics is not MuJoCo
             (a learned model in this process: policy and simulator would fight over the same
@@ -110,6 +113,7 @@ class PPOConfig:
     net_arch: tuple[int, ...] = (256, 256)
     log_std_init: float = -1.0
     use_sde: bool = False
+    sde_sample_freq: int = -1
     seed: int = 0
     torch_threads: int | None = None
 
@@ -197,7 +201,7 @@ class RunConfig:
         """Inverse of :meth:`to_json`; settings added since a config was saved take their old
         values (``use_sde``: off)."""
         known = {f.name for f in fields(PPOConfig)}
-        ppo = {**asdict(PPOConfig()), "use_sde": False,
+        ppo = {**asdict(PPOConfig()), "use_sde": False, "sde_sample_freq": -1,
                **{k: v for k, v in data["ppo"].items() if k in known}}
         ppo["net_arch"] = tuple(ppo["net_arch"])
         names = {f.name for f in fields(cls)}

@@ -145,6 +145,7 @@ def _new_model(cfg: RunConfig, vec: VecNormalize) -> RunPPO:
         clip_range=p.clip_range,
         ent_coef=p.ent_coef,
         use_sde=p.use_sde,
+        sde_sample_freq=p.sde_sample_freq,
         policy_kwargs={"net_arch": list(p.net_arch), "log_std_init": p.log_std_init},
         seed=p.seed,
         device="cpu",  # a small MLP: a GPU would only add transfers
