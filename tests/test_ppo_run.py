@@ -348,3 +348,14 @@ def test_ppo_table_plot_refuses_a_truncated_eval_csv(finished_run: Path, tmp_pat
     assert capsys.readouterr().out == ""  # nothing printed before the refusal
     (run / "eval.csv").write_text(text)
     assert main(["ppo-table", str(run), "--plot", str(tmp_path / "c.png")]) == 0
+
+
+def test_recipe_options_reach_the_saved_config(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    assert main(["ppo", *TINY_ARGS, "--env", "fignet_gym/Push-v1", "--out", str(out), "--use-sde",
+                 "--sde-sample-freq", "4", "--observation", "push-features", "--shaping", "0.5",
+                 "--success-bonus", "2"]) == 0
+    saved = RunConfig.from_json(json.loads((out / "config.json").read_text()))
+    assert saved.ppo.use_sde and saved.ppo.sde_sample_freq == 4
+    assert (saved.observation, saved.shaping, saved.success_bonus) == ("push-features", 0.5, 2.0)
+    assert PPO.load(out / "policy.zip", device="cpu").use_sde

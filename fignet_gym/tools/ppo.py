@@ -20,7 +20,7 @@ OPTIONS = {
     "seed": "--seed", "dynamics": "--dynamics", "eval_every": "--eval-every",
     "eval_episodes": "--eval-episodes", "final_episodes": "--final-episodes",
     "checkpoint_every": "--checkpoint-every", "observation": "--observation", "shaping": "--shaping",
-    "success_bonus": "--success-bonus",
+    "success_bonus": "--success-bonus", "sde_sample_freq": "--sde-sample-freq",
 }
 
 
@@ -49,6 +49,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
             net_arch=net_arch,
             log_std_init=args.log_std_init,
             use_sde=bool(getattr(args, "use_sde", PPOConfig.use_sde)),
+            sde_sample_freq=getattr(args, "sde_sample_freq", PPOConfig.sde_sample_freq),
             seed=args.seed,
         )
         return RunConfig(
