@@ -1,10 +1,11 @@
 """Agents: model-predictive planners and PPO helpers (installed as ``fignet_gym.agents``).
 
 Planners (:mod:`~fignet_gym.agents.planners`) plan any environment that exposes its task (Push,
-Toss, CubeToss, a user's own) by batched rollouts of any :class:`~fignet_gym.dynamics.Dynamics`;
-the PPO helpers (:mod:`~fignet_gym.agents.ppo`) train stable-baselines3 PPO on either dynamics
-and check a policy on another; :mod:`~fignet_gym.agents.ppo_run` is ``fignet-gym ppo``
-(resumable run folders, evaluation on both dynamics, the transfer table).
+Toss, CubeToss, a user's own) by batched rollouts of any :class:`~fignet_gym.dynamics.Dynamics`.
+PPO (:func:`~fignet_gym.agents.ppo_run.run_ppo`, what ``fignet-gym ppo`` runs) trains
+stable-baselines3 PPO on either dynamics in a resumable run folder and evaluates the policy on both
+(:func:`~fignet_gym.agents.ppo_eval.evaluate_policy_on`); :mod:`~fignet_gym.agents.ppo_table` puts
+finished runs in the transfer table.
 """
 
 from fignet_gym.agents.baselines import IdleAgent, RandomAgent
@@ -20,21 +21,11 @@ from fignet_gym.agents.planners import (
     make_planner,
     planner_config,
 )
-from fignet_gym.agents.ppo import (
-    EVAL_KEYS,
-    PPOConfig,
-    evaluate_policy_on,
-    load_policy,
-    save_policy,
-    train_ppo,
-)
-from fignet_gym.agents.ppo_run import (
-    NormalizedPolicy,
-    RunConfig,
-    load_run_policy,
-    run_ppo,
-    transfer_table,
-)
+from fignet_gym.agents.ppo_config import PPOConfig, RunConfig
+from fignet_gym.agents.ppo_eval import EVAL_KEYS, evaluate_policy_on
+from fignet_gym.agents.ppo_policy import NormalizedPolicy, load_run_policy
+from fignet_gym.agents.ppo_run import run_ppo
+from fignet_gym.agents.ppo_table import transfer_table
 from fignet_gym.agents.task import (
     PLAN_STATE_SPEC,
     PlanningProblem,
@@ -68,12 +59,9 @@ __all__ = [
     "SamplingPlanner",
     "evaluate_policy_on",
     "load_run_policy",
-    "load_policy",
     "plan_state",
     "problem_for",
     "run_episode",
     "run_ppo",
-    "save_policy",
-    "train_ppo",
     "transfer_table",
 ]

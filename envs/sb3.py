@@ -2,14 +2,17 @@
 
 stable-baselines3 does not take Gymnasium vector environments: its ``VecEnv`` resets finished
 sub-environments itself within the step and reports the last observation in
-``info["terminal_observation"]``. The adapter runs the batched vector environment in Gymnasium's
+``info["terminal_observation"]``. The adapter steps the batched vector environment in Gymnasium's
 ``SAME_STEP`` autoreset mode, which has exactly these semantics, and converts the batched infos
-into SB3's list of dictionaries.
+into SB3's list of dictionaries. The environment it is given keeps its own mode: the adapter
+switches to ``SAME_STEP`` only for the duration of its own steps, so the same vector env used
+directly afterwards still autoresets as it was made to.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 import gymnasium as gym
@@ -39,7 +42,7 @@ class SB3VecEnvAdapter(VecEnv):
 
     Args:
         venv: a batched vector environment (``gym.make_vec(id, num_envs,
-            vectorization_mode="vector_entry_point")``); switched to ``SAME_STEP`` autoreset.
+            vectorization_mode="vector_entry_point")``), in any autoreset mode (left unchanged).
     """
 
     def __init__(self, venv: BatchedVectorEnv) -> None:
@@ -50,8 +53,6 @@ class SB3VecEnvAdapter(VecEnv):
         )
         if not isinstance(venv, BatchedVectorEnv):
             raise TypeError(f"SB3VecEnvAdapter wraps a BatchedVectorEnv, got {type(venv).__name__}")
-        venv.autoreset_mode = AutoresetMode.SAME_STEP
-        venv.metadata = {**venv.metadata, "autoreset_mode": AutoresetMode.SAME_STEP}
         self.venv = venv
         self._actions: np.ndarray | None = None
         super().__init__(venv.num_envs, venv.single_observation_space, venv.single_action_space)
@@ -69,8 +70,20 @@ class SB3VecEnvAdapter(VecEnv):
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = np.asarray(actions)
 
+    @contextmanager
+    def _same_step(self) -> Iterator[None]:
+        """Step in ``SAME_STEP`` autoreset (SB3's semantics), then give the env its mode back."""
+        mode = self.venv.autoreset_mode
+        self.venv.autoreset_mode = AutoresetMode.SAME_STEP
+        try:
+            yield
+        finally:
+            self.venv.autoreset_mode = mode
+
     def step_wait(self) -> VecEnvStepReturn:
-        obs, rewards, terminated, truncated, infos = self.venv.step(self._actions)
+        """Step every sub-environment; finished ones are reset at once (SB3's ``VecEnv`` rule)."""
+        with self._same_step():
+            obs, rewards, terminated, truncated, infos = self.venv.step(self._actions)
         dones = terminated | truncated
         out = []
         for i in range(self.num_envs):
@@ -125,8 +138,10 @@ class SB3VecEnvAdapter(VecEnv):
 
 
 def make_sb3_vec_env(env_id: str, num_envs: int, **kwargs: Any) -> SB3VecEnvAdapter:
-    """SB3 view of ``gym.make_vec(env_id, num_envs, vectorization_mode="vector_entry_point")``."""
+    """SB3 view of ``gym.make_vec(env_id, num_envs, vectorization_mode="vector_entry_point")``,
+    made in ``SAME_STEP`` autoreset mode (the one SB3 expects)."""
     venv = gym.make_vec(
-        env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs
+        env_id, num_envs=num_envs, vectorization_mode="vector_entry_point",
+        autoreset_mode=AutoresetMode.SAME_STEP, **kwargs
     )
     return SB3VecEnvAdapter(venv)

@@ -252,8 +252,18 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--net-arch", default="256,256", help="hidden sizes of policy and value MLPs")
     o.add_argument("--log-std-init", type=float, default=-1.0,
                    help="initial log std of the Gaussian policy (exploration noise)")
+    o.add_argument("--use-sde", action="store_true",
+                   help="state-dependent exploration noise (gSDE) instead of white Gaussian noise")
+    o.add_argument("--sde-sample-freq", type=int, default=-1,
+                   help="with --use-sde: new noise weights every N steps (-1: once per rollout)")
     o.add_argument("--no-normalize", action="store_true",
                    help="no VecNormalize of observations and rewards")
+    o.add_argument("--observation", choices=["env", "push-features"], default="env",
+                   help="what the policy sees: the env's observation, or it and the pushing geometry")
+    o.add_argument("--shaping", type=float, default=0.0,
+                   help="weight of the potential-based progress reward during training (0: none)")
+    o.add_argument("--success-bonus", type=float, default=0.0,
+                   help="extra reward of a successful step during training (0: none)")
     o.add_argument("--eval-every", type=int, default=25_000,
                    help="evaluate on both dynamics every N steps (0: never)")
     o.add_argument("--eval-episodes", type=int, default=32, help="episodes per periodic evaluation")

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 import torch
 from sim_factories import wild_simulator
-from stable_baselines3.common.callbacks import BaseCallback
 
 import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.agents import (
@@ -22,15 +21,19 @@ from fignet_gym.agents import (
     MPPIPlanner,
     PPOConfig,
     PushProblem,
+    RunConfig,
     evaluate_policy_on,
-    load_policy,
+    load_run_policy,
     plan_state,
     run_episode,
-    train_ppo,
+    run_ppo,
 )
+from fignet_gym.agents.ppo_callback import RunCallback
 from fignet_gym.dynamics import DivergenceError, DynamicsBase, FIGNetDynamics, MujocoDynamics
 from fignet_gym.mjcf import push_object
-from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
+from fignet_gym.simulator.checkpoint import save
+from fignet_gym.simulator.config import SimulatorConfig
+from fignet_gym.simulator.model import LearnedSimulator
 
 PUSH = "fignet_gym/Push-v0"
 #: Tiny planners: the machine is shared, tests must stay fast.
@@ -263,16 +266,24 @@ def test_configs_are_validated_and_frozen() -> None:
 TINY_PPO = PPOConfig(total_timesteps=64, num_envs=2, n_steps=16, batch_size=16, n_epochs=1)
 
 
-class ThreadProbe(BaseCallback):
-    """Records torch's thread count while PPO collects and trains."""
+def tiny_run(dynamics: str, simulator: str | None = None) -> RunConfig:
+    """A 64-step run on Push-v0 with no periodic evaluation."""
+    return RunConfig(env_id=PUSH, dynamics=dynamics, ppo=TINY_PPO, simulator=simulator,
+                     eval_every=0, final_episodes=2)
 
-    def __init__(self) -> None:
-        super().__init__()
-        self.threads: set[int] = set()
 
-    def _on_step(self) -> bool:
-        self.threads.add(torch.get_num_threads())
-        return True
+@pytest.fixture()
+def thread_probe(monkeypatch: pytest.MonkeyPatch) -> set[int]:
+    """torch's thread counts seen at every training step of ``run_ppo`` (its callback, probed)."""
+    seen: set[int] = set()
+    step = RunCallback._on_step
+
+    def probed(self: RunCallback) -> bool:
+        seen.add(torch.get_num_threads())
+        return step(self)
+
+    monkeypatch.setattr(RunCallback, "_on_step", probed)
+    return seen
 
 
 def check_report(report: dict[str, Any], n: int) -> None:
@@ -284,30 +295,33 @@ def check_report(report: dict[str, Any], n: int) -> None:
     ).all()
 
 
-def test_ppo_on_mujoco_saves_loads_and_evaluates(tmp_path: Path) -> None:
+def test_ppo_on_mujoco_saves_loads_and_evaluates(tmp_path: Path, thread_probe: set[int]) -> None:
     torch.set_num_threads(2)
-    probe = ThreadProbe()
-    model = train_ppo("mujoco", config=TINY_PPO, save_path=tmp_path / "ppo", callback=probe)
-    assert model.num_timesteps >= TINY_PPO.total_timesteps
-    assert probe.threads == {2} and torch.get_num_threads() == 2  # MuJoCo: left as it was
-    assert (tmp_path / "ppo.zip").exists() and (tmp_path / "ppo.json").exists()
-    loaded = load_policy(tmp_path / "ppo.zip")
-    obs = np.zeros((1, 19), dtype=np.float32)
+    result = run_ppo(tmp_path / "run", tiny_run("mujoco"), progress=False)
+    assert result["timesteps"] >= TINY_PPO.total_timesteps
+    assert thread_probe == {2} and torch.get_num_threads() == 2  # MuJoCo: left as it was
+    loaded = load_run_policy(tmp_path / "run")
+    again = load_run_policy(tmp_path / "run")
+    obs = np.random.default_rng(0).normal(size=(3, 19)).astype(np.float32)
     np.testing.assert_array_equal(
-        model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0]
+        loaded.predict(obs, deterministic=True)[0], again.predict(obs, deterministic=True)[0]
     )
-    check_report(evaluate_policy_on("mujoco", loaded, n_episodes=2, seed=0), 2)
+    report = evaluate_policy_on("mujoco", loaded, n_episodes=2, seed=10_000, env_id=PUSH)
+    check_report(report, 2)
+    # The run's own final evaluation is the same policy on the same seeds: the same episodes.
+    assert report["episode_returns"] == result["eval"]["mujoco"]["episode_returns"]
 
 
-def test_ppo_on_learned_dynamics_uses_one_thread_and_checks_on_mujoco() -> None:
+def test_ppo_on_learned_dynamics_uses_one_thread_and_checks_on_mujoco(
+    tmp_path: Path, thread_probe: set[int]
+) -> None:
     """The core user story: train on the learned simulator, check on MuJoCo."""
     torch.set_num_threads(2)
-    sim = small_simulator()
-    probe = ThreadProbe()
-    model = train_ppo("fignet", checkpoint=sim, config=TINY_PPO, callback=probe)
-    assert probe.threads == {1} and torch.get_num_threads() == 2  # restored afterwards
-    check_report(evaluate_policy_on("fignet", model, n_episodes=2, seed=0, checkpoint=sim), 2)
-    check_report(evaluate_policy_on("mujoco", model, n_episodes=2, seed=0), 2)
+    save(small_simulator(), tmp_path / "small.pt")
+    result = run_ppo(tmp_path / "run", tiny_run("fignet", str(tmp_path / "small.pt")), progress=False)
+    assert thread_probe == {1} and torch.get_num_threads() == 2  # restored afterwards
+    check_report(result["eval"]["fignet"], 2)
+    check_report(result["eval"]["mujoco"], 2)
 
 
 class ChasePolicy:
@@ -321,7 +335,8 @@ class ChasePolicy:
 
 def test_evaluate_policy_matches_single_env_episodes() -> None:
     """Batched evaluation reproduces plain gym.make episodes seeded seed + k."""
-    report = evaluate_policy_on("mujoco", ChasePolicy(), n_episodes=3, seed=7, max_parallel=2)
+    report = evaluate_policy_on("mujoco", ChasePolicy(), n_episodes=3, seed=7, max_parallel=2,
+                                env_id=PUSH)
     env = gym.make(PUSH)
     for k in range(3):
         obs, _ = env.reset(seed=7 + k)

@@ -13,17 +13,13 @@ import torch
 from stable_baselines3 import PPO
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from fignet_gym.agents.ppo import PPOConfig
-from fignet_gym.agents.ppo_run import (
-    EVAL_SEED,
-    NormalizedPolicy,
-    RunConfig,
-    RunError,
-    load_run_policy,
-    read_csv,
-    run_ppo,
-    transfer_table,
-)
+from fignet_gym.agents.ppo_config import PPOConfig, RunConfig
+from fignet_gym.agents.ppo_eval import EVAL_SEED
+from fignet_gym.agents.ppo_logging import read_csv
+from fignet_gym.agents.ppo_policy import NormalizedPolicy, load_run_policy
+from fignet_gym.agents.ppo_run import run_ppo
+from fignet_gym.agents.ppo_rundir import RunError
+from fignet_gym.agents.ppo_table import transfer_table
 from fignet_gym.cli import main
 
 PUSH = "fignet_gym/Push-v0"
@@ -57,6 +53,7 @@ def stopped_and_resumed(tmp_path_factory: pytest.TempPathFactory) -> dict[str, o
     facts: dict[str, object] = {
         "root": root,
         "steps_stopped": steps(root / "progress.csv"),
+        "rows_stopped": read_csv(root / "progress.csv"),
         "tb_stopped": tb_steps(root, "eval/mujoco/mean_return"),
         "ckpt_state": torch.load(root / "checkpoint" / "state.pt", weights_only=False),
         "ckpt_model": PPO.load(root / "checkpoint" / "model.zip", device="cpu"),
@@ -88,13 +85,30 @@ def test_resumed_run_reaches_the_budget_and_logs_each_step_once(stopped_and_resu
     assert tb_steps(root, "eval/mujoco/mean_return") == [32, 64, 96, 128]
     assert len(list((root / "tb").glob("events.out.tfevents.*"))) == 2
     its = [float(r["time/iterations"]) for r in read_csv(root / "progress.csv")]
-    assert its == [1, 2, 1, 2]  # SB3 counts iterations per learn() call: rows 96, 128 are new
+    assert its == [1, 2, 3, 4]  # counted from the run's start, not from the resumed process's
     # The normaliser continued from the checkpoint: + 2 reset observations + 32 steps x 2 envs.
     with (root / "vecnormalize.pkl").open("rb") as fh:
         assert float(pickle.load(fh).obs_rms.count) == pytest.approx(f["ckpt_count"] + 2 + 64)
     # ... and so did the optimizer: 2 more updates of 2 minibatches.
     adam = PPO.load(root / "policy.zip", device="cpu").policy.optimizer.state_dict()["state"]
     assert {int(s["step"]) for s in adam.values()} == {8}
+
+
+def test_resumed_run_logs_the_update_its_checkpoint_carried(stopped_and_resumed: dict) -> None:
+    """SB3 writes an update's train/* with the next row; the checkpoint at 64 fell in between.
+
+    The stopped process wrote row 96 with the update made at 64; the resumed one, redoing row
+    96 from the checkpoint, must write the same values (it used to write none).
+    """
+    f = stopped_and_resumed
+    before = {r["step"]: r for r in f["rows_stopped"]}["96"]
+    after = {r["step"]: r for r in read_csv(f["root"] / "progress.csv")}
+    train = [k for k in before if k.startswith("train/") and before[k] != ""]
+    assert "train/loss" in train and "train/approx_kl" in train
+    assert {k: after["96"][k] for k in train} == {k: before[k] for k in train}
+    # Every row after the first update carries train/* (the first has no update before it).
+    assert after["32"].get("train/loss", "") == ""
+    assert all(after[s]["train/loss"] != "" for s in ("64", "96", "128"))
 
 
 def test_final_eval_covers_both_dynamics_on_the_same_seeds(stopped_and_resumed: dict) -> None:
@@ -220,3 +234,128 @@ def test_ppo_table_names_a_wrong_final_eval(tmp_path: Path, capsys: pytest.Captu
     assert main(["ppo-table", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"error: {tmp_path / 'final_eval.json'}: ")
+
+
+# ----------------------------------------------------------------------------- refused before writing
+TINY_ARGS = ["--env", PUSH, "--dynamics", "mujoco", "--steps", "32", "--num-envs", "2",
+             "--n-steps", "16", "--batch-size", "16", "--n-epochs", "1", "--eval-every", "0",
+             "--final-episodes", "1", "--quiet"]
+
+
+def one_error_line(capsys: pytest.CaptureFixture) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: "), err
+    return err[0]
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "allowed"),
+    [("--n-epochs", "0", "[1, 1000]"), ("--ent-coef", "nan", "[0, 1]"),
+     ("--log-std-init", "inf", "[-20, 2]"), ("--gamma", "2", "[0, 1]"),
+     ("--num-envs", "100000000", "[1, 1024]"), ("--lr", "-1", "(0, 1]"),
+     ("--steps", "0", ">= 1"), ("--seed", "-1", "[0, "), ("--net-arch", "0", "[1, "),
+     ("--eval-every", "-5", ">= 0"), ("--batch-size", "1000", "n_steps * num_envs")],
+)
+def test_every_setting_is_checked_before_anything_is_written(
+    tmp_path: Path, capsys: pytest.CaptureFixture, option: str, value: str, allowed: str
+) -> None:
+    out = tmp_path / "run"
+    assert main(["ppo", *TINY_ARGS, "--out", str(out), option, value]) == 2
+    line = one_error_line(capsys)
+    assert line.startswith(f"error: {option} must be") and allowed in line and value in line
+    assert not out.exists()
+
+
+def test_non_fignet_env_is_refused_before_anything_is_written(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    out = tmp_path / "run"
+    args = ["ppo", *TINY_ARGS, "--out", str(out)]
+    assert main([*args, "--env", "CartPole-v1"]) == 2
+    line = one_error_line(capsys)
+    assert "CartPole-v1" in line and "not a fignet_gym environment" in line
+    assert "fignet_gym/Push-v1" in line  # the allowed ids
+    assert not out.exists()
+    with pytest.raises(RunError, match="not a fignet_gym"):
+        run_ppo(out, RunConfig(env_id="CartPole-v1"), progress=False)
+    assert not out.exists()
+
+
+def test_resume_below_the_steps_done_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "run"
+    args = ["ppo", *TINY_ARGS, "--out", str(out), "--steps", "64"]
+    assert main(args) == 0
+    capsys.readouterr()
+    files = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert main([*args, "--resume", "--steps", "32"]) == 2
+    line = one_error_line(capsys)
+    assert "--steps 32" in line and "64" in line
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == files  # nothing written
+    assert main([*args, "--resume"]) == 0  # the run's own budget again: accepted (re-evaluated)
+
+
+# ----------------------------------------------------------------------------- ppo-table on bad files
+def _finished(tmp_path: Path) -> Path:
+    out = tmp_path / "run"
+    cfg = RunConfig(env_id=PUSH, dynamics="mujoco", eval_every=32, eval_episodes=1, final_episodes=1,
+                    ppo=PPOConfig(total_timesteps=64, num_envs=2, n_steps=16, batch_size=16, n_epochs=1))
+    run_ppo(out, cfg, progress=False)
+    return out
+
+
+@pytest.fixture(scope="module")
+def finished_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return _finished(tmp_path_factory.mktemp("finished"))
+
+
+@pytest.mark.parametrize(
+    ("edit", "named"),
+    [(lambda r: r["eval"]["mujoco"].update(success_rate=float("nan")), "eval.mujoco.success_rate"),
+     (lambda r: r["eval"]["fignet"].update(success_rate=1.5), "eval.fignet.success_rate"),
+     (lambda r: r.update(timesteps=-64), "timesteps"),
+     (lambda r: r.update(cpu_seconds=-1.0), "cpu_seconds"),
+     (lambda r: r["eval"]["mujoco"].update(n_episodes=0), "eval.mujoco.n_episodes"),
+     (lambda r: r["config"].update(dynamics="bullet"), "config.dynamics")],
+)
+def test_ppo_table_refuses_hand_edited_values(finished_run: Path, tmp_path: Path,
+                                              capsys: pytest.CaptureFixture, edit, named: str) -> None:
+    run = tmp_path / "copy"
+    shutil.copytree(finished_run, run)
+    res = json.loads((run / "final_eval.json").read_text())
+    edit(res)
+    (run / "final_eval.json").write_text(json.dumps(res))
+    assert main(["ppo-table", str(run), "--out", str(tmp_path / "t.md")]) == 2
+    line = one_error_line(capsys)
+    assert f"final_eval.json: {named} must be" in line
+    assert not (tmp_path / "t.md").exists()
+
+
+@pytest.mark.parametrize("cut", ["header", "half_row", "empty"])
+def test_ppo_table_plot_refuses_a_truncated_eval_csv(finished_run: Path, tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture, cut: str) -> None:
+    run = tmp_path / "copy"
+    shutil.copytree(finished_run, run)
+    text = (run / "eval.csv").read_text()
+    lines = text.splitlines()
+    assert len(lines) == 3  # header, rows at 32 and 64
+    cuts = {"header": lines[0] + "\n", "half_row": "\n".join(lines[:2]) + "\n" + lines[2][:12],
+            "empty": ""}
+    (run / "eval.csv").write_text(cuts[cut])
+    assert main(["ppo-table", str(run), "--plot", str(tmp_path / "c.png")]) == 2
+    line = one_error_line(capsys)
+    assert "eval.csv" in line
+    assert not (tmp_path / "c.png").exists()
+    assert capsys.readouterr().out == ""  # nothing printed before the refusal
+    (run / "eval.csv").write_text(text)
+    assert main(["ppo-table", str(run), "--plot", str(tmp_path / "c.png")]) == 0
+
+
+def test_recipe_options_reach_the_saved_config(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    assert main(["ppo", *TINY_ARGS, "--env", "fignet_gym/Push-v1", "--out", str(out), "--use-sde",
+                 "--sde-sample-freq", "4", "--observation", "push-features", "--shaping", "0.5",
+                 "--success-bonus", "2"]) == 0
+    saved = RunConfig.from_json(json.loads((out / "config.json").read_text()))
+    assert saved.ppo.use_sde and saved.ppo.sde_sample_freq == 4
+    assert (saved.observation, saved.shaping, saved.success_bonus) == ("push-features", 0.5, 2.0)
+    assert PPO.load(out / "policy.zip", device="cpu").use_sde

@@ -213,7 +213,7 @@ def test_plan_refuses_other_packages_envs_before_writing(tmp_path: Path,
     """Was: ``TypeError`` from ``gym.make('CartPole-v1', dynamics=...)``."""
     out = tmp_path / "run"
     assert main(["plan", "--env", "CartPole-v1", "--out", str(out)]) == 2
-    one_error_line(capsys, "--env", "CartPole-v1", "not a fignet_gym environment", "fignet_gym/Push-v1")
+    one_error_line(capsys, "--env", "CartPole-v1", "takes no dynamics= argument", "fignet_gym/Push-v1")
     assert not out.exists()
 
 

@@ -286,12 +286,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     ids = sorted(k for k in gym.registry if k.startswith(ENV_NAMESPACE))
     if args.env not in gym.registry:
         raise PlanError(f"--env: unknown environment {args.env!r}; use one of {ids}")
-    if not args.env.startswith(ENV_NAMESPACE):  # another package's env takes none of our kwargs
-        raise PlanError(f"--env: {args.env} is not a fignet_gym environment; use one of {ids}")
     out = Path(args.out)
     env_kwargs = {"dynamics": args.act_dynamics}
     render = {"render_mode": "rgb_array", "width": 320, "height": 320} if args.videos else {}
-    env = gym.make(args.env, **render, **env_kwargs)
+    try:
+        env = gym.make(args.env, **render, **env_kwargs)
+    except TypeError as err:  # another package's env (CartPole) takes none of these arguments
+        raise PlanError(f"--env: {args.env} takes no dynamics= argument (plannable envs: {ids} or "
+                        f"a user's env with dynamics= and a task): {err}") from None
     if not isinstance(getattr(env.unwrapped, "task", None), Task):
         raise PlanError(f"--env: {args.env} exposes no task to plan (env.task: a "
                         f"fignet_gym.envs.tasks.Task); {type(env.unwrapped).__name__} has none")

@@ -6,9 +6,23 @@ import argparse
 import sys
 from pathlib import Path
 
-from fignet_gym.agents.ppo import PPOConfig
-from fignet_gym.agents.ppo_run import RunConfig, RunError, plot_curves, run_ppo, transfer_table
+from fignet_gym.agents.ppo_config import ConfigError, PPOConfig, RunConfig
+from fignet_gym.agents.ppo_run import check_env_id, run_ppo
+from fignet_gym.agents.ppo_rundir import FINAL_EVAL, RunError
+from fignet_gym.agents.ppo_table import plot_curves, read_curves, read_final_eval, transfer_table
 from fignet_gym.atomic import output_lock
+
+#: The ``fignet-gym ppo`` option of each config field (errors name the option the user typed).
+OPTIONS = {
+    "total_timesteps": "--steps", "num_envs": "--num-envs", "n_steps": "--n-steps",
+    "batch_size": "--batch-size", "n_epochs": "--n-epochs", "learning_rate": "--lr",
+    "gamma": "--gamma", "gae_lambda": "--gae-lambda", "ent_coef": "--ent-coef",
+    "net_arch": "--net-arch", "log_std_init": "--log-std-init", "use_sde": "--use-sde",
+    "seed": "--seed", "dynamics": "--dynamics", "eval_every": "--eval-every",
+    "eval_episodes": "--eval-episodes", "final_episodes": "--final-episodes",
+    "checkpoint_every": "--checkpoint-every", "observation": "--observation", "shaping": "--shaping",
+    "success_bonus": "--success-bonus", "sde_sample_freq": "--sde-sample-freq",
+}
 
 
 def _error(message: str) -> int:
@@ -17,52 +31,60 @@ def _error(message: str) -> int:
 
 
 def config_from_args(args: argparse.Namespace) -> RunConfig:
-    """The :class:`RunConfig` of ``fignet-gym ppo``'s arguments (``ValueError`` if invalid)."""
+    """The :class:`RunConfig` of ``fignet-gym ppo``'s arguments (``ValueError`` naming the option)."""
     try:
         net_arch = tuple(int(x) for x in args.net_arch.split(","))
     except ValueError:
         raise ValueError(f"--net-arch must be comma-separated integers, got {args.net_arch!r}") from None
-    ppo = PPOConfig(
-        total_timesteps=args.steps,
-        num_envs=args.num_envs,
-        n_steps=args.n_steps,
-        batch_size=args.batch_size,
-        n_epochs=args.n_epochs,
-        learning_rate=args.lr,
-        gamma=args.gamma,
-        ent_coef=args.ent_coef,
-        net_arch=net_arch,
-        log_std_init=args.log_std_init,
-        seed=args.seed,
-    )
-    return RunConfig(
-        env_id=args.env,
-        dynamics=args.dynamics,
-        ppo=ppo,
-        simulator=args.simulator,
-        norm_obs=not args.no_normalize,
-        norm_reward=not args.no_normalize,
-        eval_every=args.eval_every,
-        eval_episodes=args.eval_episodes,
-        final_episodes=args.final_episodes,
-        checkpoint_every=args.checkpoint_every,
-    )
+    try:
+        ppo = PPOConfig(
+            total_timesteps=args.steps,
+            num_envs=args.num_envs,
+            n_steps=args.n_steps,
+            batch_size=args.batch_size,
+            n_epochs=args.n_epochs,
+            learning_rate=args.lr,
+            gamma=args.gamma,
+            gae_lambda=getattr(args, "gae_lambda", PPOConfig.gae_lambda),
+            ent_coef=args.ent_coef,
+            net_arch=net_arch,
+            log_std_init=args.log_std_init,
+            use_sde=bool(getattr(args, "use_sde", PPOConfig.use_sde)),
+            sde_sample_freq=getattr(args, "sde_sample_freq", PPOConfig.sde_sample_freq),
+            seed=args.seed,
+        )
+        return RunConfig(
+            env_id=args.env,
+            dynamics=args.dynamics,
+            ppo=ppo,
+            simulator=args.simulator,
+            norm_obs=not args.no_normalize,
+            norm_reward=not args.no_normalize,
+            eval_every=args.eval_every,
+            eval_episodes=args.eval_episodes,
+            final_episodes=args.final_episodes,
+            checkpoint_every=args.checkpoint_every,
+            observation=args.observation,
+            shaping=args.shaping,
+            success_bonus=args.success_bonus,
+        )
+    except ConfigError as err:
+        raise ValueError(f"{OPTIONS.get(err.setting, err.setting)} {err.detail}") from None
 
 
 def run_ppo_command(args: argparse.Namespace) -> int:
-    """Train/resume the run, print its transfer-table rows (with ``--compare`` runs)."""
-    import gymnasium as gym
+    """Train/resume the run, print its transfer-table rows (with ``--compare`` runs).
 
-    import fignet_gym.envs  # noqa: F401  (registers the environments)
-
-    if args.env not in gym.registry:
-        ids = sorted(k for k in gym.registry if k.startswith("fignet_gym/"))
-        return _error(f"--env {args.env!r} is not registered (fignet_gym ids: {', '.join(ids)})")
-    for run in args.compare:
-        if not (Path(run) / "final_eval.json").exists():
-            return _error(f"--compare {run}: no final_eval.json (not a finished `fignet-gym ppo` run)")
+    Every option, the env id and the ``--compare`` runs are checked before anything is written.
+    """
     try:
+        check_env_id(args.env)
         cfg = config_from_args(args)
+        for run in args.compare:
+            path = Path(run) / FINAL_EVAL
+            if not path.exists():
+                return _error(f"--compare {run}: no {FINAL_EVAL} (not a finished `fignet-gym ppo` run)")
+            read_final_eval(path)
         with output_lock(args.out):  # one process per run folder
             run_ppo(args.out, cfg, resume=args.resume, force=args.force, progress=not args.quiet)
         print(transfer_table([args.out, *args.compare]))
@@ -72,10 +94,14 @@ def run_ppo_command(args: argparse.Namespace) -> int:
 
 
 def ppo_table_command(args: argparse.Namespace) -> int:
-    """Print (and optionally write) the transfer table of finished runs."""
+    """Print (and optionally write) the transfer table of finished runs; every file is checked
+    (and the curves read) before anything is printed or written."""
     try:
         table = transfer_table(args.runs)
-    except RunError as err:
+        if args.plot:
+            for run in args.runs:
+                read_curves(run)
+    except (RunError, ValueError) as err:
         return _error(str(err))
     print(table)
     if args.out:

@@ -1,11 +1,11 @@
-"""Reliability audit (issue 16): hostile inputs through the public API and the CLI, classified.
+"""Reliability audit: hostile inputs through the public API and the CLI, classified.
 
-Run as a script (``python tests/audit_reliability.py [--quick]``) it prints a table of cases per
+Run as a script (``python scripts/audit_reliability.py [--quick]``) it prints a table of cases per
 class and outcome. Outcomes: ``clear`` (a refusal naming the problem: a ``ValueError`` /
 ``CheckpointError`` / ``RuntimeError`` from the API, or one ``error:`` line and a non-zero exit
 from the CLI), ``silent`` (accepted although it is wrong), ``traceback`` (another exception type,
 or a CLI traceback), ``nan`` (NaN reached an observation), ``hang`` (killed by the time or memory
-limit), ``ok`` (a valid input handled correctly). Used before and after the fixes of issue 16 to
+limit), ``ok`` (a valid input handled correctly). Used before and after the reliability fixes to
 count what changed; the fast checks of the same classes are in ``tests/test_reliability.py``.
 """
 

@@ -1,0 +1,168 @@
+"""Finished PPO runs side by side: the transfer table (trained on x evaluated on) and the curves.
+
+Both read files a user can edit or a copy can truncate, so both check what they read and name
+the file and the field at fault (``ValueError``) rather than print ``nan%`` or an empty plot.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from fignet_gym.agents.ppo_config import DYNAMICS
+from fignet_gym.agents.ppo_rundir import CONFIG, FINAL_EVAL, RunError
+
+#: Fields of each dynamics' report the table reads.
+REPORT_FIELDS = ("success_rate", "mean_return", "n_episodes")
+#: The columns of ``eval.csv`` the curves read, per dynamics.
+CURVE_KEYS = ("success_rate", "mean_return")
+
+
+def _number(x: Any) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _count(x: Any, low: int) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool) and x >= low
+
+
+def read_final_eval(path: Path) -> dict[str, Any]:
+    """A run's ``final_eval.json``, checked for what :func:`transfer_table` reads.
+
+    Raises ``ValueError("{path}: ...")`` for a file that is not JSON, lacks a field, or holds a
+    value out of its range (a success rate outside [0, 1], a negative step count, a NaN).
+    """
+    try:
+        res = json.loads(path.read_text())
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{path}: not valid JSON ({err.msg} at line {err.lineno})") from None
+    evals = res.get("eval") if isinstance(res, dict) else None
+    ok = (isinstance(res, dict) and isinstance(res.get("config"), dict)
+          and "dynamics" in res["config"] and "timesteps" in res and "cpu_seconds" in res
+          and isinstance(evals, dict)
+          and all(isinstance(evals.get(k), dict) and all(f in evals[k] for f in REPORT_FIELDS)
+                  for k in DYNAMICS))
+    if not ok:
+        raise ValueError(f"{path}: not a final evaluation (needs config.dynamics, timesteps, "
+                         "cpu_seconds and eval.mujoco / eval.fignet with success_rate, "
+                         "mean_return, n_episodes)")
+    checks = [
+        ("config.dynamics", res["config"]["dynamics"], lambda x: x in DYNAMICS, f"one of {DYNAMICS}"),
+        ("timesteps", res["timesteps"], lambda x: _count(x, 0), "an integer >= 0"),
+        ("cpu_seconds", res["cpu_seconds"], lambda x: _number(x) and x >= 0, "a number >= 0"),
+    ]
+    for dyn in DYNAMICS:
+        rep = evals[dyn]
+        checks += [
+            (f"eval.{dyn}.success_rate", rep["success_rate"], lambda x: _number(x) and 0 <= x <= 1,
+             "a number in [0, 1]"),
+            (f"eval.{dyn}.mean_return", rep["mean_return"], _number, "a finite number"),
+            (f"eval.{dyn}.n_episodes", rep["n_episodes"], lambda x: _count(x, 1), "an integer >= 1"),
+        ]
+    for name, value, ok_value, allowed in checks:
+        if not ok_value(value):
+            raise ValueError(f"{path}: {name} must be {allowed}, got {value!r}")
+    return res
+
+
+def transfer_table(runs: Sequence[str | os.PathLike]) -> str:
+    """Markdown table: each run (its training dynamics) x evaluated on MuJoCo / on FIGNet.
+
+    Reads every run's ``final_eval.json`` (same seeds ``EVAL_SEED + k`` for all runs and both
+    dynamics). Cells: success rate and mean return (the env's reward) over the episodes.
+    """
+    lines = [
+        "| trained on | steps | CPU h | eval on MuJoCo: success | return "
+        "| eval on FIGNet: success | return | episodes |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for run in runs:
+        path = Path(run) / FINAL_EVAL
+        if not path.exists():
+            raise RunError(f"{path}: missing (the run has not finished)")
+        res = read_final_eval(path)
+        m, f = res["eval"]["mujoco"], res["eval"]["fignet"]
+        lines.append(
+            f"| {res['config']['dynamics']} ({Path(run).name}) | {res['timesteps']:,} | "
+            f"{res['cpu_seconds'] / 3600:.2f} | {m['success_rate']:.0%} | {m['mean_return']:.1f} | "
+            f"{f['success_rate']:.0%} | {f['mean_return']:.1f} | {m['n_episodes']} / {f['n_episodes']} |"
+        )
+    return "\n".join(lines)
+
+
+def read_curves(run: str | os.PathLike) -> tuple[str, list[int], dict[str, list[float]]]:
+    """A run's periodic evaluations: training dynamics, steps ``int[R]`` and each
+    ``"<dynamics>/<key>"`` column ``float[R]`` of ``eval.csv``.
+
+    Raises ``ValueError`` naming the file for a missing config, an ``eval.csv`` without rows, a
+    row cut short, a value that is not a number in its range, or steps that do not increase.
+    """
+    root = Path(run)
+    path = root / "eval.csv"
+    try:
+        trained = json.loads((root / CONFIG).read_text())["dynamics"]
+        with path.open(newline="") as f:
+            rows = list(csv.DictReader(f))
+    except (OSError, json.JSONDecodeError, KeyError, TypeError) as err:
+        raise ValueError(f"{root}: not a PPO run folder ({type(err).__name__}: {err})") from None
+    if not rows:
+        raise ValueError(f"{path}: no periodic evaluations to plot (a run with --eval-every 0?)")
+    columns = [f"{d}/{k}" for d in DYNAMICS for k in CURVE_KEYS]
+    steps: list[int] = []
+    values: dict[str, list[float]] = {c: [] for c in columns}
+    for line, row in enumerate(rows, start=2):
+        try:
+            step = int(row["step"])
+            parsed = {c: float(row[c]) for c in columns}
+        except (KeyError, TypeError, ValueError):
+            raise ValueError(f"{path}: line {line} is incomplete or not numeric (the file is "
+                             f"truncated or edited; it needs step and {', '.join(columns)})") from None
+        bad = [c for c, v in parsed.items()
+               if not math.isfinite(v) or (c.endswith("success_rate") and not 0 <= v <= 1)]
+        if bad or (steps and step <= steps[-1]) or step < 0:
+            raise ValueError(f"{path}: line {line} has out-of-range values "
+                             f"({', '.join(bad) or 'step'})")
+        steps.append(step)
+        for c in columns:
+            values[c].append(parsed[c])
+    return trained, steps, values
+
+
+def plot_curves(runs: Sequence[str | os.PathLike], path: str | os.PathLike) -> Path:
+    """Periodic evaluation of each run (``eval.csv``): success rate and return vs training steps.
+
+    One line per run and evaluation dynamics (solid: MuJoCo, dashed: FIGNet); saved as an image.
+    Every run is read (and checked, :func:`read_curves`) before anything is drawn.
+    """
+    curves = [read_curves(run) for run in runs]
+
+    import matplotlib
+    import matplotlib.ticker
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    for i, (trained, x, values) in enumerate(curves):
+        for dyn, style in (("mujoco", "-"), ("fignet", "--")):
+            for ax, key in zip(axes, CURVE_KEYS, strict=True):
+                ax.plot(x, values[f"{dyn}/{key}"], style, color=f"C{i}",
+                        label=f"trained on {trained}, eval on {dyn}")
+    axes[0].set_ylabel("success rate")
+    axes[1].set_ylabel("mean episode return (env reward)")
+    for ax in axes:
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v / 1000:g}k"))
+        ax.set_xlabel("training environment steps")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
