@@ -334,3 +334,43 @@ def test_sim2real_pretrain_fits_on_the_smallest_subset_and_fine_tunes_each_size(
     assert "started with pretrain 3 (now 0):" in capsys.readouterr().err
     assert main(argv + ["--resume", "--no-polish"]) == 2  # polished sizes would be stale
     assert "started with polish True (now False):" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- the pushing path
+
+
+def test_pushes_rest_on_the_floor_and_tosses_do_not(tmp_path: Path) -> None:
+    """Pushes carry no free flight: they are recognised from their poses (so no gravity is
+    measured), tosses are not; lifting a push's object by 2 cm makes it a non-resting file."""
+    from fignet_gym.train.sim2real import rests_on_floor
+
+    raw = tmp_path / "raw"
+    assert main(["mit-standin", "--out", str(raw), "--num", "2", "--seed", "1"]) == 0
+    assert main(["import-mit", str(raw), "--out", str(tmp_path / "p.h5")]) == 0
+    pushes = load_trajectories(tmp_path / "p.h5")
+    assert rests_on_floor(pushes)
+    lifted = pushes[0]
+    lifted.poses[5:, 1, 2] += 0.02
+    assert not rests_on_floor([lifted])
+    tosses = list(iter_trajectories("toss-simple", 1, seed=0))
+    assert not rests_on_floor(tosses)
+
+
+def test_sim2real_pushing_standin_command_runs_end_to_end(tmp_path: Path) -> None:
+    """The documented stand-in commands (docs/sim2real.md), on a tiny file and budget: a fine-tune
+    of ``push`` keeps its own gravity prior (a pushed object never flies), and the fit searches
+    no gravity."""
+    raw, data, out = tmp_path / "raw", tmp_path / "standin.h5", tmp_path / "s2r"
+    assert main(["mit-standin", "--out", str(raw), "--num", "10", "--seed", "0"]) == 0
+    assert main(["import-mit", str(raw), "--out", str(data)]) == 0
+    assert main(["sim2real", "--data", str(data), "--out", str(out), "--horizon", "10",
+                 "--sizes", "2", "--config", "push-finetune", "--init", "push", "--budget", "2",
+                 "--fit-evaluations", "3", "--fit-trajectories", "2", "--no-polish"]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert results["rests_on_floor"] and set(results["fignet"]) == {"2"}
+    fit = json.loads((out / "mujoco_fit.json").read_text())
+    assert "gravity" not in fit["params"] and "friction_kinematic" in fit["params"]
+    from fignet_gym.pretrained import load_pretrained
+
+    gravity = json.loads((out / "fignet_2" / "split.json").read_text())["gravity"]
+    assert gravity == list(load_pretrained("push").config.gravity)

@@ -48,6 +48,9 @@ _QUANTITIES = (("translation_rmse_final", "transl. @h (mm)"), ("rotation_deg_fin
                ("translation_rmse_last", "transl. last (mm)"), ("rotation_deg_last", "rot. last (deg)"))
 
 
+#: A dynamic object whose lowest node stays this close (m) to ``z = 0`` in every frame rests on
+#: the floor (the threshold of ``free_flight_gravity``'s free flight).
+FLOOR_CLEARANCE = 0.01
 #: ``--pretrain``: optimiser steps on the synthetic tosses (pushforward after 1/8 of them).
 PRETRAIN_STEPS = 8000
 #: ``--pretrain``: how each size fine-tunes the pretrained model: a low learning rate and
@@ -79,12 +82,76 @@ def default_train(config: str = "cube-real", budget: int | None = None,
         from fignet_gym.data.format import load_trajectories
         from fignet_gym.train import real
 
-        n = size if size is not None else len(load_trajectories(train_file))
+        trajs = load_trajectories(train_file)
+        n = size if size is not None else len(trajs)
+        sets = dict(overrides or {})
+        if "simulator.gravity" not in sets and rests_on_floor(trajs[:n]):
+            # Pushes: nothing flies, so there is no gravity to measure, and none to learn (the
+            # floor balances it): the model keeps its own prior.
+            sets["simulator.gravity"] = prior_gravity(config, init)
         return real.train_on_split(train_file, valid_file, size, out_dir, budget, config=config,
-                                   overrides=overrides, init=init,
+                                   overrides=sets or None, init=init,
                                    polish=polish and n >= real.POLISH_MIN_SIZE)
 
     return train
+
+
+def rests_on_floor(trajs: Sequence[Any], clearance: float = FLOOR_CLEARANCE) -> bool:
+    """True if in every frame of every trajectory the lowest node of each dynamic object is within
+    ``clearance`` (m) of the floor plane ``z = 0``: planar pushes, whose objects never fly.
+
+    Such data carries no free flight to measure gravity from (``free_flight_gravity``), and its
+    motion does not depend on gravity apart from the friction it loads, which the friction
+    coefficients absorb.
+    """
+    import torch
+
+    from fignet_gym.data.format import build_scene
+
+    for traj in trajs:
+        scene = build_scene(traj)
+        dyn = scene.dynamic_mask
+        if not bool(dyn.any()):
+            continue
+        poses = torch.as_tensor(traj.poses, dtype=torch.float32)
+        z = scene.node_positions(poses)[:, :, 2]  # [T, N]
+        for o in dyn.nonzero().flatten().tolist():
+            low = z[:, scene.node_object == o].amin(dim=1)  # [T]
+            if bool((low.abs() > clearance).any()):
+                return False
+    return True
+
+
+def push_space(kinematic: bool = True) -> tuple[Any, ...]:
+    """The searched parameters of objects on a floor: ``DEFAULT_SPACE`` without gravity, plus,
+    with ``kinematic`` objects (a pusher), their own friction: object-floor and tip-object
+    friction, torsional friction, ``solref`` (the cone and the substeps are chosen as for any
+    fit)."""
+    from fignet_gym.train.sysid import DEFAULT_SPACE, KINEMATIC_ONLY
+
+    return tuple(d for d in DEFAULT_SPACE if d.name != "gravity") + (KINEMATIC_ONLY if kinematic
+                                                                     else ())
+
+
+def _has_kinematic(traj: Any) -> bool:
+    from fignet_gym.simulator.scene import ObjectKind
+
+    return bool((traj.kinds == int(ObjectKind.KINEMATIC)).any())
+
+
+def prior_gravity(config: str, init: str | None = None) -> tuple[float, float, float]:
+    """The gravity prior ``(gx, gy, gz)`` a model keeps when the data cannot measure one: the
+    ``init`` checkpoint's own (a fine-tune), else the ``config`` preset's."""
+    from fignet_gym.simulator.model import SimulatorConfig
+
+    if init is not None:
+        from fignet_gym.pretrained import load_checkpoint
+
+        return tuple(float(g) for g in load_checkpoint(init).config.gravity)  # type: ignore[return-value]
+    from fignet_gym.train.training import load_run_config
+
+    sim_cfg, _ = load_run_config(config)
+    return tuple(float(g) for g in SimulatorConfig.from_dict(sim_cfg).gravity)  # type: ignore[return-value]
 
 
 def _read(path: Path) -> dict[str, Any] | None:
@@ -194,9 +261,14 @@ def run_sim2real(
         print("nominal MuJoCo on the test split ...")
         nominal = _mujoco_metrics(test, base, given, horizon)
         _write(out / "mujoco_nominal.json", nominal)
+    # Pushes on a floor: gravity only loads the friction, which the friction coefficients
+    # absorb, so it is not searched (the two would be one degenerate direction).
+    planar = rests_on_floor(train)
+    stages["rests_on_floor"] = planar
+    space = push_space(kinematic=any(_has_kinematic(t) for t in train)) if planar else None
     fit = fit_contact_params(train, valid, out / "mujoco_fit.json", base=base,
                              evaluations=fit_evaluations, fit_trajectories=fit_trajectories,
-                             given=given, horizon=horizon, seed=seed)
+                             given=given, horizon=horizon, seed=seed, space=space)
     fitted_params = ContactParams.from_json(fit["params"])
     _write(out / "mujoco_fitted_env.json",
            env_parameters(fitted_params, test[0].dt, f"sim2real fit on {Path(data).name} "
@@ -377,5 +449,6 @@ def summary_lines(results: dict[str, Any]) -> list[str]:
     return [f"fitted MuJoCo: {text}"]
 
 
-__all__ = ["FINETUNE_OVERRIDES", "PRETRAIN_STEPS", "Sim2RealError", "default_train", "format_table",
-           "parse_sizes", "plot_sizes", "pretrain_checkpoint", "run_sim2real", "summary_lines"]
+__all__ = ["FINETUNE_OVERRIDES", "FLOOR_CLEARANCE", "PRETRAIN_STEPS", "Sim2RealError", "default_train", "format_table",
+           "parse_sizes", "plot_sizes", "pretrain_checkpoint", "prior_gravity", "push_space",
+           "rests_on_floor", "run_sim2real", "summary_lines"]
