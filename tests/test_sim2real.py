@@ -374,3 +374,32 @@ def test_sim2real_pushing_standin_command_runs_end_to_end(tmp_path: Path) -> Non
 
     gravity = json.loads((out / "fignet_2" / "split.json").read_text())["gravity"]
     assert gravity == list(load_pretrained("push").config.gravity)
+    assert {"limit_surface", "noise_floor"} <= set(results)
+    table = (out / "table.md").read_text()
+    assert "limit surface, fitted" in table and "noise floor" in table
+
+
+def test_tracking_noise_recovers_known_noise_and_zero_noise_has_no_floor() -> None:
+    """White noise of known size on smooth planar tracks is estimated within 10%; the fitted
+    MuJoCo replayed from unperturbed starts reproduces itself (zero floor, to rounding)."""
+    from fignet_gym.train.real_baselines import noise_floor, tracking_noise
+
+    trajs = list(iter_trajectories("push", 3, seed=3))  # MuJoCo pushes: smooth tracks
+    rng = np.random.default_rng(0)
+    sigma, sigma_deg = 2e-4, 0.2
+    noisy = []
+    for t in trajs:
+        poses = np.array(t.poses)
+        poses[:, 1, :2] += rng.normal(0, sigma, poses[:, 1, :2].shape)
+        yaw = 2 * np.arctan2(poses[:, 1, 6], poses[:, 1, 3]) + np.radians(
+            rng.normal(0, sigma_deg, len(poses)))
+        poses[:, 1, 3:] = np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], 1)
+        noisy.append(type(t)(**{**t.__dict__, "poses": poses}))
+    est = tracking_noise(noisy)
+    assert est["planar"]
+    assert est["position_m"] == pytest.approx(sigma, rel=0.1)
+    assert est["rotation_deg"] == pytest.approx(sigma_deg, rel=0.1)
+    floor = noise_floor(trajs[:2], ContactParams(substeps=trajs[0].metadata["substeps"]),
+                        {"position_m": 0.0, "rotation_deg": 0.0, "planar": True}, horizon=10,
+                        samples=1)
+    assert floor["translation_rmse_final"] < 1e-8 and floor["rotation_deg_final"] < 1e-5

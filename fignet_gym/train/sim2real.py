@@ -279,7 +279,14 @@ def run_sim2real(
         fitted = _mujoco_metrics(test, fitted_params, given, horizon)
         _write(out / "mujoco_fitted.json", fitted)
 
+    from fignet_gym.train.real_baselines import run_stages
+
+    extra = run_stages(out, train, test, fitted_params, fitted, planar and space is not None
+                       and any(_has_kinematic(t) for t in train), given, horizon,
+                       fit_trajectories, seed)
     cpu_hours: dict[str, Any] = {"mujoco_fit": fit.get("cpu_seconds", math.nan) / 3600}
+    for name, r in extra.items():
+        cpu_hours[name] = r["cpu_seconds"] / 3600
     if pretrain and fignet:
         k0 = min([s for s in sizes if s is not None], default=n_train)
         info = _pretrain(train[:k0], valid, split_dir / "valid.h5", out / "pretrain", pretrain,
@@ -315,11 +322,14 @@ def run_sim2real(
             learned[label] = res
             cpu_hours.setdefault("fignet", {})[label] = run_cpu_hours(out / f"fignet_{label}")
     cpu_hours["total"] = (cpu_hours["mujoco_fit"] + cpu_hours.get("pretrain", 0.0)
+                          + sum(cpu_hours.get(name, 0.0) for name in extra)
                           + sum(cpu_hours.get("fignet", {}).values()))
     results = {"run": run_cfg, **stages, "cpu_hours": cpu_hours,
                "fit": {k: fit[k] for k in ("params", "valid", "cpu_seconds")},
                "mujoco_nominal": _headline(nominal), "mujoco_fitted": _headline(fitted),
                "no_motion": _headline(fitted, prefix="still_"),
+               **{name: {**_headline(r), **{k: r[k] for k in ("params", "vs_fitted_mujoco", "noise")
+                                            if k in r}} for name, r in extra.items()},
                "fignet": {k: {**_headline(v), "training_trajectories": v["training_trajectories"],
                               "vs_fitted_mujoco": v["vs_fitted_mujoco"]} for k, v in learned.items()}}
     _write(results_path, results)
@@ -400,8 +410,18 @@ def format_table(results: dict[str, Any]) -> str:
     lines.append(row("no motion", results["no_motion"]))
     lines.append(row("MuJoCo, nominal", results["mujoco_nominal"]))
     lines.append(row("MuJoCo, fitted", results["mujoco_fitted"]))
+    if "limit_surface" in results:
+        lines.append(row("limit surface, fitted", results["limit_surface"]))
+    if "noise_floor" in results:
+        nf = results["noise_floor"]
+        lines.append(row(f"noise floor ({1000 * nf['noise']['position_m']:.3f} mm, "
+                         f"{nf['noise']['rotation_deg']:.3f} deg)", nf))
     for r in results["fignet"].values():
         lines.append(row(f"FIGNet, {r['training_trajectories']} train", r))
+    if "vs_fitted_mujoco" in results.get("limit_surface", {}):
+        v = results["limit_surface"]["vs_fitted_mujoco"]
+        lines += ["", "Limit surface / fitted MuJoCo (paired bootstrap 95%): " + ", ".join(
+            f"{k} {v[k][0]:.2f} [{v[k][1]:.2f}, {v[k][2]:.2f}]" for k in v)]
     if results["fignet"]:
         lines += ["", "FIGNet / fitted MuJoCo, ratio of medians on the same test trajectories "
                   "(paired bootstrap 95% interval):", "",
