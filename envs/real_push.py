@@ -16,6 +16,9 @@ import os
 from pathlib import Path
 from typing import Any
 
+import mujoco
+import numpy as np
+
 from fignet_gym.dynamics.base import Dynamics
 from fignet_gym.envs.push import PushEnv, PushVectorEnv
 from fignet_gym.registration import PUSH_V1_KWARGS
@@ -24,6 +27,8 @@ from fignet_gym.registration import PUSH_V1_KWARGS
 STEP_SECONDS = 0.02
 #: Timesteps per step that ``PushEnv`` builds its model with (2 ms each: one 0.02 s step).
 BUILD_FRAME_SKIP = 10
+#: Object-floor friction of a fit that left it alone (``PushEnv``'s default).
+DEFAULT_FRICTION = 0.25
 #: The objects of the shipped real pushes (MIT Pushing on ABS).
 REAL_SHAPES = ("butter", "ellip1", "ellip3", "hex", "rect1")
 
@@ -35,13 +40,47 @@ def fitted_params_path() -> Path:
     return pretrained_dir() / "push-real.mujoco.json"
 
 
-def load_fitted_params(spec: str | os.PathLike | dict[str, Any] | None = None) -> Any:
-    """``ContactParams`` from a JSON file or dict in ``ContactParams`` form plus an optional
-    ``"source"`` (default: the shipped :func:`fitted_params_path`)."""
-    from fignet_gym.train.analytic import ContactParams
+#: Keys of the shipped fit (``fignet_gym.train.analytic.ContactParams`` fields, as ``sim2real``
+#: writes them in ``mujoco_fit.json``'s ``params``) and ``"source"``.
+FIT_KEYS = ("friction", "friction_kinematic", "torsional", "rolling", "timeconst", "dampratio",
+            "cone", "impratio", "noslip_iterations", "substeps")
 
+
+def load_fitted_params(spec: str | os.PathLike | dict[str, Any] | None = None) -> dict[str, Any]:
+    """The fitted parameters (a JSON file or dict of :data:`FIT_KEYS`, plus an optional
+    ``"source"``; default: the shipped :func:`fitted_params_path`); ``ValueError`` on other keys."""
     raw = spec if isinstance(spec, dict) else json.loads(Path(spec or fitted_params_path()).read_text())
-    return ContactParams.from_json({k: v for k, v in raw.items() if k != "source"})
+    params = {k: v for k, v in raw.items() if k != "source"}
+    unknown = sorted(set(params) - set(FIT_KEYS))
+    if unknown:
+        raise ValueError(f"RealPushEnv: mujoco_params: unknown keys {unknown}; known: {list(FIT_KEYS)}")
+    return params
+
+
+def apply_fitted(model: mujoco.MjModel, params: dict[str, Any], step_seconds: float) -> int:
+    """Set the fitted contact parameters on ``model`` in place, as ``sim2real``'s replays do
+    (friction of the floor and object; ``friction_kinematic`` of the mocap tip; torsional and
+    rolling friction and ``solref`` of every geom; cone, ``impratio``; timestep ``step_seconds /
+    substeps``); returns the substeps per step."""
+    kin = np.array([model.body_mocapid[b] >= 0 for b in model.geom_bodyid])
+    columns = {"friction": (~kin, 0), "friction_kinematic": (kin, 0), "torsional": (slice(None), 1),
+               "rolling": (slice(None), 2)}
+    for key, (rows, col) in columns.items():
+        if params.get(key) is not None:
+            model.geom_friction[rows, col] = params[key]
+    for key, col in (("timeconst", 0), ("dampratio", 1)):
+        if params.get(key) is not None:
+            model.geom_solref[:, col] = params[key]
+    if params.get("cone") is not None:
+        model.opt.cone = (mujoco.mjtCone.mjCONE_ELLIPTIC if params["cone"] == "elliptic"
+                          else mujoco.mjtCone.mjCONE_PYRAMIDAL)
+    if params.get("impratio") is not None:
+        model.opt.impratio = params["impratio"]
+    if params.get("noslip_iterations") is not None:
+        model.opt.noslip_iterations = int(params["noslip_iterations"])
+    substeps = int(params.get("substeps") or max(1, round(step_seconds / model.opt.timestep)))
+    model.opt.timestep = step_seconds / substeps
+    return substeps
 
 
 class RealPushEnv(PushEnv):
@@ -72,14 +111,13 @@ class RealPushEnv(PushEnv):
         if dynamics == "fignet" and checkpoint is None:
             checkpoint = "push-real"
         super().__init__(dynamics, checkpoint, shape=shape,
-                         friction=self.fitted.friction or 0.25,
-                         tip_friction=self.fitted.friction_kinematic,
+                         friction=self.fitted.get("friction") or DEFAULT_FRICTION,
+                         tip_friction=self.fitted.get("friction_kinematic"),
                          frame_skip=BUILD_FRAME_SKIP, **{**PUSH_V1_KWARGS, **kwargs})
         if dynamics == "mujoco":
             # The fit's solref, cone, torsional friction and timestep; a learned model keeps the
             # built model (it reads only geometry and its own step).
-            self.fitted.apply(self.model, STEP_SECONDS)
-            self.nstep = self.fitted.substeps_for(self.model, STEP_SECONDS)
+            self.nstep = apply_fitted(self.model, self.fitted, STEP_SECONDS)
             self.dynamics.validate(self.model, self.nstep, self.scene_type)
         self.step_time = self.nstep * float(self.model.opt.timestep)
 
@@ -90,5 +128,5 @@ class RealPushVectorEnv(PushVectorEnv):
     env_class = RealPushEnv
 
 
-__all__ = ["REAL_SHAPES", "RealPushEnv", "RealPushVectorEnv", "fitted_params_path",
-           "load_fitted_params"]
+__all__ = ["FIT_KEYS", "REAL_SHAPES", "RealPushEnv", "RealPushVectorEnv", "apply_fitted",
+           "fitted_params_path", "load_fitted_params"]

@@ -28,20 +28,22 @@ def test_check_env_and_seeded_episodes() -> None:
     env.close()
 
 
-def test_mujoco_backend_carries_the_fitted_parameters() -> None:
-    """The model the env steps has the fit's frictions, solref and timestep; a step is 0.02 s;
-    the task is Push-v1's."""
-    import mujoco
+def test_mujoco_backend_carries_the_fitted_parameters_as_the_replays_do() -> None:
+    """The env's model has exactly what ``ContactParams.apply`` (the sim2real replays) sets on
+    the same scene; a step is 0.02 s; the task is Push-v1's."""
+    import copy
+
+    from fignet_gym.train.analytic import ContactParams
 
     fit = load_fitted_params()
     env = RealPushEnv()
-    m = env.model
-    tip = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "tip")
-    obj = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "object")
-    assert m.geom_friction[obj, 0] == pytest.approx(fit.friction)
-    assert m.geom_friction[tip, 0] == pytest.approx(fit.friction_kinematic)
-    assert m.geom_solref[obj, 0] == pytest.approx(fit.timeconst)
-    assert env.nstep == fit.substeps and env.step_time == pytest.approx(STEP_SECONDS)
+    ref = copy.copy(RealPushEnv(dynamics="mujoco", mujoco_params={}).model)
+    ContactParams.from_json(fit).apply(ref, STEP_SECONDS)
+    for field in ("geom_friction", "geom_solref"):
+        np.testing.assert_array_equal(getattr(env.model, field), getattr(ref, field))
+    for field in ("cone", "impratio", "timestep"):
+        assert getattr(env.model.opt, field) == getattr(ref.opt, field)
+    assert env.nstep == fit["substeps"] and env.step_time == pytest.approx(STEP_SECONDS)
     assert env.task.success_yaw == pytest.approx(PUSH_V1_KWARGS["success_yaw"])
 
 
@@ -50,3 +52,5 @@ def test_refuses_unknown_shapes_and_parameters_the_fit_sets() -> None:
         RealPushEnv(shape="tri3")
     with pytest.raises(ValueError, match="friction"):
         RealPushEnv(friction=0.3)
+    with pytest.raises(ValueError, match="unknown keys"):
+        RealPushEnv(mujoco_params={"gravity": -9.8})
