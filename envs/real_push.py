@@ -114,11 +114,11 @@ class RealPushEnv(PushEnv):
                          friction=self.fitted.get("friction") or DEFAULT_FRICTION,
                          tip_friction=self.fitted.get("friction_kinematic"),
                          frame_skip=BUILD_FRAME_SKIP, **{**PUSH_V1_KWARGS, **kwargs})
-        if dynamics == "mujoco":
-            # The fit's solref, cone, torsional friction and timestep; a learned model keeps the
-            # built model (it reads only geometry and its own step).
-            self.nstep = apply_fitted(self.model, self.fitted, STEP_SECONDS)
-            self.dynamics.validate(self.model, self.nstep, self.scene_type)
+        # The fit's solref, cone, frictions and timestep, whatever acts: a planner's MuJoCo model
+        # of this env is then the fitted MuJoCo too (a learned model reads only geometry and the
+        # step's length, still 0.02 s).
+        self.nstep = apply_fitted(self.model, self.fitted, STEP_SECONDS)
+        self.dynamics.validate(self.model, self.nstep, self.scene_type)
         self.step_time = self.nstep * float(self.model.opt.timestep)
 
 
