@@ -54,3 +54,18 @@ def test_refuses_unknown_shapes_and_parameters_the_fit_sets() -> None:
         RealPushEnv(friction=0.3)
     with pytest.raises(ValueError, match="unknown keys"):
         RealPushEnv(mujoco_params={"gravity": -9.8})
+
+
+def test_push_real_ships_with_its_fit_and_drives_the_env() -> None:
+    from fignet_gym import load_pretrained
+    from fignet_gym.pretrained import pretrained_dir, pretrained_path
+
+    sim = load_pretrained("push-real")
+    assert sim.config.scene_type == "push" and sim.config.dt == pytest.approx(STEP_SECONDS)
+    assert pretrained_path("push-real").stat().st_size < 10e6
+    card = (pretrained_dir() / "push-real.md").read_text()
+    assert 'load_pretrained("push-real")' in card and "CPU hours" in card
+    env = RealPushEnv(dynamics="fignet")  # push-real by default
+    env.reset(seed=0)
+    obs, *_ = env.step(np.array([1.0, 0.0]))
+    assert np.isfinite(obs).all()
