@@ -27,7 +27,7 @@ import numpy as np
 from fignet_gym.data.format import Trajectory
 
 #: The limit-surface grid: pusher-object friction and factor on the uniform-pressure radius.
-LS_FRICTIONS = (0.05, 0.1, 0.2, 0.3, 0.45, 0.65, 0.9, 1.3)
+LS_FRICTIONS = (0.05, 0.1, 0.2, 0.3, 0.45, 0.65, 0.9, 1.3, 2.0, 3.0, 5.0)
 LS_SCALES = (0.6, 0.8, 1.0, 1.25, 1.5)
 #: Median absolute deviation to standard deviation for Gaussian noise.
 MAD_TO_STD = 1.4826
