@@ -437,7 +437,8 @@ def format_table(results: dict[str, Any]) -> str:
 
 
 def plot_sizes(results: dict[str, Any], path: Path) -> None:
-    """Errors (% of no motion) against training-set size: FIGNet points, MuJoCo lines."""
+    """Errors (% of no motion) against training-set size: FIGNet points, MuJoCo (and, for pushes,
+    limit-surface) lines."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -450,9 +451,11 @@ def plot_sizes(results: dict[str, Any], path: Path) -> None:
         if fg:
             ax.plot([r["training_trajectories"] for r in fg], [100 * r[k] for r in fg], "o-",
                     label="FIGNet")
-        for label, style in (("mujoco_fitted", "--"), ("mujoco_nominal", ":")):
-            ax.axhline(100 * results[label][k], linestyle=style, color="k" if "fit" in label else "gray",
-                       label=label.replace("mujoco_", "MuJoCo, "))
+        for label, style in (("mujoco_fitted", "--"), ("mujoco_nominal", ":"), ("limit_surface", "-.")):
+            if label in results:
+                ax.axhline(100 * results[label][k], linestyle=style,
+                           color={"mujoco_fitted": "k", "limit_surface": "tab:red"}.get(label, "gray"),
+                           label=label.replace("mujoco_", "MuJoCo, ").replace("_", " "))
         ax.set(xscale="log", xlabel="training trajectories", title=name.replace(
             "@h", f"@{results['mujoco_fitted']['horizon_step']}"), ylabel="% of no motion")
         ax.grid(alpha=0.3, which="both")
