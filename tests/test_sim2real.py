@@ -324,7 +324,9 @@ def test_sim2real_pretrain_fits_on_the_smallest_subset_and_fine_tunes_each_size(
         assert run_cfg["training"]["lr"] == s2r.FINETUNE_OVERRIDES["training.lr"]
     assert set(res["cpu_hours"]["fignet"]) == {"1", "all"}
     parts = res["cpu_hours"]
-    stages = parts["mujoco_fit"] + parts["pretrain"] + sum(parts["fignet"].values())
+    stages = (parts["mujoco_fit"] + parts["pretrain"] + parts["noise_floor"]  # tosses: no limit surface
+              + sum(parts["fignet"].values()))
+    assert "limit_surface" not in parts
     assert parts["total"] == pytest.approx(stages)
     assert "initialised from" in capsys.readouterr().out
     # --pretrain and --init exclude each other; a run started without --pretrain is not resumed with it

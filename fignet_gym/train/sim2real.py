@@ -472,6 +472,6 @@ def summary_lines(results: dict[str, Any]) -> list[str]:
     return [f"fitted MuJoCo: {text}"]
 
 
-__all__ = ["FINETUNE_OVERRIDES", "FLOOR_CLEARANCE", "PRETRAIN_STEPS", "Sim2RealError", "default_train", "format_table",
-           "parse_sizes", "plot_sizes", "pretrain_checkpoint", "prior_gravity", "push_space",
+__all__ = ["FINETUNE_OVERRIDES", "FLOOR_CLEARANCE", "PRETRAIN_STEPS", "Sim2RealError", "default_train",
+           "format_table", "parse_sizes", "plot_sizes", "pretrain_checkpoint", "prior_gravity", "push_space",
            "rests_on_floor", "run_sim2real", "summary_lines"]
