@@ -34,6 +34,9 @@ ENV_SPECS: dict[str, tuple[str, str, int | None, dict[str, Any]]] = {
     "fignet_gym/Toss-v0": (
         "fignet_gym.envs.toss:TossEnv", "fignet_gym.envs.toss:TossVectorEnv", None, {}
     ),
+    "fignet_gym/RealPush-v0": (
+        "fignet_gym.envs.real_push:RealPushEnv", "fignet_gym.envs.real_push:RealPushVectorEnv", 75, {}
+    ),
     "fignet_gym/CubeToss-v0": (
         "fignet_gym.envs.cube_toss:CubeTossEnv", "fignet_gym.envs.cube_toss:CubeTossVectorEnv",
         None, {},

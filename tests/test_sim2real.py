@@ -326,7 +326,9 @@ def test_sim2real_pretrain_fits_on_the_smallest_subset_and_fine_tunes_each_size(
         assert run_cfg["training"]["lr"] == s2r.FINETUNE_OVERRIDES["training.lr"]
     assert set(res["cpu_hours"]["fignet"]) == {"1", "all"}
     parts = res["cpu_hours"]
-    stages = parts["mujoco_fit"] + parts["pretrain"] + sum(parts["fignet"].values())
+    stages = (parts["mujoco_fit"] + parts["pretrain"] + parts["noise_floor"]  # tosses: no limit surface
+              + sum(parts["fignet"].values()))
+    assert "limit_surface" not in parts
     assert parts["total"] == pytest.approx(stages)
     assert "initialised from" in capsys.readouterr().out
     # --pretrain and --init exclude each other; a run started without --pretrain is not resumed with it
@@ -336,3 +338,72 @@ def test_sim2real_pretrain_fits_on_the_smallest_subset_and_fine_tunes_each_size(
     assert "started with pretrain 3 (now 0):" in capsys.readouterr().err
     assert main(argv + ["--resume", "--no-polish"]) == 2  # polished sizes would be stale
     assert "started with polish True (now False):" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- the pushing path
+
+
+def test_pushes_rest_on_the_floor_and_tosses_do_not(tmp_path: Path) -> None:
+    """Pushes carry no free flight: they are recognised from their poses (so no gravity is
+    measured), tosses are not; lifting a push's object by 2 cm makes it a non-resting file."""
+    from fignet_gym.train.sim2real import rests_on_floor
+
+    raw = tmp_path / "raw"
+    assert main(["mit-standin", "--out", str(raw), "--num", "2", "--seed", "1"]) == 0
+    assert main(["import-mit", str(raw), "--out", str(tmp_path / "p.h5")]) == 0
+    pushes = load_trajectories(tmp_path / "p.h5")
+    assert rests_on_floor(pushes)
+    lifted = pushes[0]
+    lifted.poses[5:, 1, 2] += 0.02
+    assert not rests_on_floor([lifted])
+    tosses = list(iter_trajectories("toss-simple", 1, seed=0))
+    assert not rests_on_floor(tosses)
+
+
+def test_sim2real_pushing_standin_command_runs_end_to_end(tmp_path: Path) -> None:
+    """The documented stand-in commands (docs/sim2real.md), on a tiny file and budget: a fine-tune
+    of ``push`` keeps its own gravity prior (a pushed object never flies), and the fit searches
+    no gravity."""
+    raw, data, out = tmp_path / "raw", tmp_path / "standin.h5", tmp_path / "s2r"
+    assert main(["mit-standin", "--out", str(raw), "--num", "10", "--seed", "0"]) == 0
+    assert main(["import-mit", str(raw), "--out", str(data)]) == 0
+    assert main(["sim2real", "--data", str(data), "--out", str(out), "--horizon", "10",
+                 "--sizes", "2", "--config", "push-finetune", "--init", "push", "--budget", "2",
+                 "--fit-evaluations", "3", "--fit-trajectories", "2", "--no-polish"]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert results["rests_on_floor"] and set(results["fignet"]) == {"2"}
+    fit = json.loads((out / "mujoco_fit.json").read_text())
+    assert "gravity" not in fit["params"] and "friction_kinematic" in fit["params"]
+    from fignet_gym.pretrained import load_pretrained
+
+    gravity = json.loads((out / "fignet_2" / "split.json").read_text())["gravity"]
+    assert gravity == list(load_pretrained("push").config.gravity)
+    assert {"limit_surface", "noise_floor"} <= set(results)
+    table = (out / "table.md").read_text()
+    assert "limit surface, fitted" in table and "noise floor" in table
+
+
+def test_tracking_noise_recovers_known_noise_and_zero_noise_has_no_floor() -> None:
+    """White noise of known size on smooth planar tracks is estimated within 10%; the fitted
+    MuJoCo replayed from unperturbed starts reproduces itself (zero floor, to rounding)."""
+    from fignet_gym.train.real_baselines import noise_floor, tracking_noise
+
+    trajs = list(iter_trajectories("push", 3, seed=3))  # MuJoCo pushes: smooth tracks
+    rng = np.random.default_rng(0)
+    sigma, sigma_deg = 2e-4, 0.2
+    noisy = []
+    for t in trajs:
+        poses = np.array(t.poses)
+        poses[:, 1, :2] += rng.normal(0, sigma, poses[:, 1, :2].shape)
+        yaw = 2 * np.arctan2(poses[:, 1, 6], poses[:, 1, 3]) + np.radians(
+            rng.normal(0, sigma_deg, len(poses)))
+        poses[:, 1, 3:] = np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], 1)
+        noisy.append(type(t)(**{**t.__dict__, "poses": poses}))
+    est = tracking_noise(noisy)
+    assert est["planar"]
+    assert est["position_m"] == pytest.approx(sigma, rel=0.1)
+    assert est["rotation_deg"] == pytest.approx(sigma_deg, rel=0.1)
+    floor = noise_floor(trajs[:2], ContactParams(substeps=trajs[0].metadata["substeps"]),
+                        {"position_m": 0.0, "rotation_deg": 0.0, "planar": True}, horizon=10,
+                        samples=1)
+    assert floor["translation_rmse_final"] < 1e-8 and floor["rotation_deg_final"] < 1e-5

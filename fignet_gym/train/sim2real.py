@@ -51,6 +51,9 @@ _QUANTITIES = (("translation_rmse_final", "transl. @h (mm)"), ("rotation_deg_fin
                ("translation_rmse_last", "transl. last (mm)"), ("rotation_deg_last", "rot. last (deg)"))
 
 
+#: A dynamic object whose lowest node stays this close (m) to ``z = 0`` in every frame rests on
+#: the floor (the threshold of ``free_flight_gravity``'s free flight).
+FLOOR_CLEARANCE = 0.01
 #: ``--pretrain``: optimiser steps on the synthetic tosses (pushforward after 1/8 of them).
 PRETRAIN_STEPS = 8000
 #: ``--pretrain``: how each size fine-tunes the pretrained model: a low learning rate and
@@ -82,12 +85,75 @@ def default_train(config: str = "cube-real", budget: int | None = None,
         from fignet_gym.data.format import load_trajectories
         from fignet_gym.train import real
 
-        n = size if size is not None else len(load_trajectories(train_file))
+        trajs = load_trajectories(train_file)
+        n = size if size is not None else len(trajs)
+        sets = dict(overrides or {})
+        if "simulator.gravity" not in sets and rests_on_floor(trajs[:n]):
+            # Pushes: nothing flies, so there is no gravity to measure, and none to learn (the
+            # floor balances it): the model keeps its own prior.
+            sets["simulator.gravity"] = prior_gravity(config, init)
         return real.train_on_split(train_file, valid_file, size, out_dir, budget, config=config,
-                                   overrides=overrides, init=init,
+                                   overrides=sets or None, init=init,
                                    polish=polish and n >= real.POLISH_MIN_SIZE)
 
     return train
+
+
+def rests_on_floor(trajs: Sequence[Any], clearance: float = FLOOR_CLEARANCE) -> bool:
+    """True if in every frame of every trajectory the lowest node of each dynamic object is within
+    ``clearance`` (m) of the floor plane ``z = 0``: planar pushes, whose objects never fly.
+
+    Such data carries no free flight to measure gravity from (``free_flight_gravity``), and its
+    motion does not depend on gravity apart from the friction it loads, which the friction
+    coefficients absorb.
+    """
+    import torch
+
+    from fignet_gym.data.format import build_scene
+
+    for traj in trajs:
+        scene = build_scene(traj)
+        dyn = scene.dynamic_mask
+        if not bool(dyn.any()):
+            continue
+        poses = torch.as_tensor(traj.poses, dtype=torch.float32)
+        z = scene.node_positions(poses)[:, :, 2]  # [T, N]
+        for o in dyn.nonzero().flatten().tolist():
+            low = z[:, scene.node_object == o].amin(dim=1)  # [T]
+            if bool((low.abs() > clearance).any()):
+                return False
+    return True
+
+
+def push_space(kinematic: bool = True) -> tuple[Any, ...]:
+    """The searched parameters of objects on a floor: ``DEFAULT_SPACE`` without gravity, plus,
+    with ``kinematic`` objects (a pusher), their own friction: object-floor and tip-object
+    friction, torsional friction, ``solref`` (the cone and the substeps are chosen as for any
+    fit)."""
+    from fignet_gym.train.sysid import DEFAULT_SPACE, KINEMATIC_ONLY
+
+    return tuple(d for d in DEFAULT_SPACE if d.name != "gravity") + (KINEMATIC_ONLY if kinematic
+                                                                     else ())
+
+
+def _has_kinematic(traj: Any) -> bool:
+    from fignet_gym.simulator.scene import ObjectKind
+
+    return bool((traj.kinds == int(ObjectKind.KINEMATIC)).any())
+
+
+def prior_gravity(config: str, init: str | None = None) -> tuple[float, float, float]:
+    """The gravity prior ``(gx, gy, gz)`` a model keeps when the data cannot measure one: the
+    ``init`` checkpoint's own (a fine-tune), else the ``config`` preset's."""
+    from fignet_gym.pretrained import load_pretrained
+    from fignet_gym.simulator.config import SimulatorConfig
+    from fignet_gym.train.config import load_run_config
+
+    if init is not None:
+        return tuple(float(g) for g in load_pretrained(init).config.gravity)  # type: ignore[return-value]
+
+    sim_cfg, _ = load_run_config(config)
+    return tuple(float(g) for g in SimulatorConfig.from_dict(sim_cfg).gravity)  # type: ignore[return-value]
 
 
 def _read(path: Path) -> dict[str, Any] | None:
@@ -202,9 +268,14 @@ def run_sim2real(
         print("nominal MuJoCo on the test split ...")
         nominal = _mujoco_metrics(test, base, given, horizon)
         _write(out / "mujoco_nominal.json", nominal)
+    # Pushes on a floor: gravity only loads the friction, which the friction coefficients
+    # absorb, so it is not searched (the two would be one degenerate direction).
+    planar = rests_on_floor(train)
+    stages["rests_on_floor"] = planar
+    space = push_space(kinematic=any(_has_kinematic(t) for t in train)) if planar else None
     fit = fit_contact_params(train, valid, out / "mujoco_fit.json", base=base,
                              evaluations=fit_evaluations, fit_trajectories=fit_trajectories,
-                             given=given, horizon=horizon, seed=seed)
+                             given=given, horizon=horizon, seed=seed, space=space)
     fitted_params = ContactParams.from_json(fit["params"])
     _write(out / "mujoco_fitted_env.json",
            env_parameters(fitted_params, test[0].dt, f"sim2real fit on {Path(data).name} "
@@ -215,7 +286,14 @@ def run_sim2real(
         fitted = _mujoco_metrics(test, fitted_params, given, horizon)
         _write(out / "mujoco_fitted.json", fitted)
 
+    from fignet_gym.train.real_baselines import run_stages
+
+    extra = run_stages(out, train, test, fitted_params, fitted, planar and space is not None
+                       and any(_has_kinematic(t) for t in train), given, horizon,
+                       fit_trajectories, seed)
     cpu_hours: dict[str, Any] = {"mujoco_fit": fit.get("cpu_seconds", math.nan) / 3600}
+    for name, r in extra.items():
+        cpu_hours[name] = r["cpu_seconds"] / 3600
     if pretrain and fignet:
         k0 = min([s for s in sizes if s is not None], default=n_train)
         info = _pretrain(train[:k0], valid, split_dir / "valid.h5", out / "pretrain", pretrain,
@@ -252,11 +330,14 @@ def run_sim2real(
             learned[label] = res
             cpu_hours.setdefault("fignet", {})[label] = run_cpu_hours(out / f"fignet_{label}")
     cpu_hours["total"] = (cpu_hours["mujoco_fit"] + cpu_hours.get("pretrain", 0.0)
+                          + sum(cpu_hours.get(name, 0.0) for name in extra)
                           + sum(cpu_hours.get("fignet", {}).values()))
     results = {"run": run_cfg, **stages, "cpu_hours": cpu_hours,
                "fit": {k: fit[k] for k in ("params", "valid", "cpu_seconds")},
                "mujoco_nominal": _headline(nominal), "mujoco_fitted": _headline(fitted),
                "no_motion": _headline(fitted, prefix="still_"),
+               **{name: {**_headline(r), **{k: r[k] for k in ("params", "vs_fitted_mujoco", "noise")
+                                            if k in r}} for name, r in extra.items()},
                "fignet": {k: {**_headline(v), "training_trajectories": v["training_trajectories"],
                               "vs_fitted_mujoco": v["vs_fitted_mujoco"]} for k, v in learned.items()}}
     _write(results_path, results)
@@ -368,8 +449,18 @@ def format_table(results: dict[str, Any]) -> str:
     lines.append(row("no motion", results["no_motion"]))
     lines.append(row("MuJoCo, nominal", results["mujoco_nominal"]))
     lines.append(row("MuJoCo, fitted", results["mujoco_fitted"]))
+    if "limit_surface" in results:
+        lines.append(row("limit surface, fitted", results["limit_surface"]))
+    if "noise_floor" in results:
+        nf = results["noise_floor"]
+        lines.append(row(f"noise floor ({1000 * nf['noise']['position_m']:.3f} mm, "
+                         f"{nf['noise']['rotation_deg']:.3f} deg)", nf))
     for r in results["fignet"].values():
         lines.append(row(f"FIGNet, {r['training_trajectories']} train", r))
+    if "vs_fitted_mujoco" in results.get("limit_surface", {}):
+        v = results["limit_surface"]["vs_fitted_mujoco"]
+        lines += ["", "Limit surface / fitted MuJoCo (paired bootstrap 95%): " + ", ".join(
+            f"{k} {v[k][0]:.2f} [{v[k][1]:.2f}, {v[k][2]:.2f}]" for k in v)]
     if results["fignet"]:
         lines += ["", "FIGNet / fitted MuJoCo, ratio of medians on the same test trajectories "
                   "(paired bootstrap 95% interval):", "",
@@ -385,7 +476,8 @@ def format_table(results: dict[str, Any]) -> str:
 
 
 def plot_sizes(results: dict[str, Any], path: Path) -> None:
-    """Errors (% of no motion) against training-set size: FIGNet points, MuJoCo lines."""
+    """Errors (% of no motion) against training-set size: FIGNet points, MuJoCo (and, for pushes,
+    limit-surface) lines."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -398,9 +490,11 @@ def plot_sizes(results: dict[str, Any], path: Path) -> None:
         if fg:
             ax.plot([r["training_trajectories"] for r in fg], [100 * r[k] for r in fg], "o-",
                     label="FIGNet")
-        for label, style in (("mujoco_fitted", "--"), ("mujoco_nominal", ":")):
-            ax.axhline(100 * results[label][k], linestyle=style, color="k" if "fit" in label else "gray",
-                       label=label.replace("mujoco_", "MuJoCo, "))
+        for label, style in (("mujoco_fitted", "--"), ("mujoco_nominal", ":"), ("limit_surface", "-.")):
+            if label in results:
+                ax.axhline(100 * results[label][k], linestyle=style,
+                           color={"mujoco_fitted": "k", "limit_surface": "tab:red"}.get(label, "gray"),
+                           label=label.replace("mujoco_", "MuJoCo, ").replace("_", " "))
         ax.set(xscale="log", xlabel="training trajectories", title=name.replace(
             "@h", f"@{results['mujoco_fitted']['horizon_step']}"), ylabel="% of no motion")
         ax.grid(alpha=0.3, which="both")
@@ -417,5 +511,6 @@ def summary_lines(results: dict[str, Any]) -> list[str]:
     return [f"fitted MuJoCo: {text}"]
 
 
-__all__ = ["FINETUNE_OVERRIDES", "PRETRAIN_STEPS", "Sim2RealError", "default_train", "format_table",
-           "parse_sizes", "plot_sizes", "pretrain_checkpoint", "run_sim2real", "summary_lines"]
+__all__ = ["FINETUNE_OVERRIDES", "FLOOR_CLEARANCE", "PRETRAIN_STEPS", "Sim2RealError", "default_train",
+           "format_table", "parse_sizes", "plot_sizes", "pretrain_checkpoint", "prior_gravity", "push_space",
+           "rests_on_floor", "run_sim2real", "summary_lines"]

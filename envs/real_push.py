@@ -1,0 +1,131 @@
+"""``RealPush-v0``: :class:`~fignet_gym.envs.push.PushEnv`'s task on dynamics fitted to real pushes.
+
+The object is one of the MIT Pushing objects recorded on ABS (the five of the shipped real
+pushes), and both backends come from those recordings: ``dynamics="fignet"`` is ``push-real``
+(FIGNet fine-tuned on them), ``dynamics="mujoco"`` is MuJoCo with the contact parameters fitted to
+the same training pushes (``fignet_gym/pretrained/push-real.mujoco.json``: object-floor and
+tip-object friction, torsional friction, ``solref``, cone and substeps). The task, observation,
+action and reward are ``Push-v1``'s (:class:`~fignet_gym.envs.tasks.PushTask`, ``env.task``), so
+planners and PPO run on it unchanged.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from fignet_gym.dynamics.base import Dynamics
+from fignet_gym.envs.push import PushEnv, PushVectorEnv
+from fignet_gym.registration import PUSH_V1_KWARGS
+
+#: Seconds per environment step: the real pushes' resampling step, the one ``push-real`` learned.
+STEP_SECONDS = 0.02
+#: Timesteps per step that ``PushEnv`` builds its model with (2 ms each: one 0.02 s step).
+BUILD_FRAME_SKIP = 10
+#: Object-floor friction of a fit that left it alone (``PushEnv``'s default).
+DEFAULT_FRICTION = 0.25
+#: The objects of the shipped real pushes (MIT Pushing on ABS).
+REAL_SHAPES = ("butter", "ellip1", "ellip3", "hex", "rect1")
+
+
+def fitted_params_path() -> Path:
+    """The shipped fitted MuJoCo of the real pushes (next to ``push-real.pt``)."""
+    from fignet_gym.pretrained import pretrained_dir
+
+    return pretrained_dir() / "push-real.mujoco.json"
+
+
+#: Keys of the shipped fit (``fignet_gym.train.analytic.ContactParams`` fields, as ``sim2real``
+#: writes them in ``mujoco_fit.json``'s ``params``) and ``"source"``.
+FIT_KEYS = ("friction", "friction_kinematic", "torsional", "rolling", "timeconst", "dampratio",
+            "cone", "impratio", "noslip_iterations", "substeps")
+
+
+def load_fitted_params(spec: str | os.PathLike | dict[str, Any] | None = None) -> dict[str, Any]:
+    """The fitted parameters (a JSON file or dict of :data:`FIT_KEYS`, plus an optional
+    ``"source"``; default: the shipped :func:`fitted_params_path`); ``ValueError`` on other keys."""
+    raw = spec if isinstance(spec, dict) else json.loads(Path(spec or fitted_params_path()).read_text())
+    params = {k: v for k, v in raw.items() if k != "source"}
+    unknown = sorted(set(params) - set(FIT_KEYS))
+    if unknown:
+        raise ValueError(f"RealPushEnv: mujoco_params: unknown keys {unknown}; known: {list(FIT_KEYS)}")
+    return params
+
+
+def apply_fitted(model: mujoco.MjModel, params: dict[str, Any], step_seconds: float) -> int:
+    """Set the fitted contact parameters on ``model`` in place, as ``sim2real``'s replays do
+    (friction of the floor and object; ``friction_kinematic`` of the mocap tip; torsional and
+    rolling friction and ``solref`` of every geom; cone, ``impratio``; timestep ``step_seconds /
+    substeps``); returns the substeps per step."""
+    kin = np.array([model.body_mocapid[b] >= 0 for b in model.geom_bodyid])
+    columns = {"friction": (~kin, 0), "friction_kinematic": (kin, 0), "torsional": (slice(None), 1),
+               "rolling": (slice(None), 2)}
+    for key, (rows, col) in columns.items():
+        if params.get(key) is not None:
+            model.geom_friction[rows, col] = params[key]
+    for key, col in (("timeconst", 0), ("dampratio", 1)):
+        if params.get(key) is not None:
+            model.geom_solref[:, col] = params[key]
+    if params.get("cone") is not None:
+        model.opt.cone = (mujoco.mjtCone.mjCONE_ELLIPTIC if params["cone"] == "elliptic"
+                          else mujoco.mjtCone.mjCONE_PYRAMIDAL)
+    if params.get("impratio") is not None:
+        model.opt.impratio = params["impratio"]
+    if params.get("noslip_iterations") is not None:
+        model.opt.noslip_iterations = int(params["noslip_iterations"])
+    substeps = int(params.get("substeps") or max(1, round(step_seconds / model.opt.timestep)))
+    model.opt.timestep = step_seconds / substeps
+    return substeps
+
+
+class RealPushEnv(PushEnv):
+    """Push a real MIT Pushing object on ABS to a goal pose, on reality-fitted dynamics.
+
+    Everything of ``Push-v1`` (see :class:`~fignet_gym.envs.push.PushEnv`: spaces, reward,
+    episode end, the other arguments), with these differences:
+
+    | argument | default | meaning |
+    |---|---|---|
+    | dynamics | ``"mujoco"`` | ``"mujoco"`` (fitted), ``"fignet"`` (``push-real``) or a ``Dynamics`` |
+    | checkpoint | ``None`` | ``"fignet"``: default ``push-real`` |
+    | shape | ``"rect1"`` | one of :data:`REAL_SHAPES` |
+    | mujoco_params | ``None`` | fitted parameters (JSON path or dict; default: the shipped fit) |
+
+    One step is 0.02 s whatever the backend (MuJoCo: the fit's substeps per step).
+    """
+
+    def __init__(self, dynamics: str | Dynamics = "mujoco", checkpoint: Any = None,
+                 shape: str = "rect1", mujoco_params: str | os.PathLike | dict[str, Any] | None = None,
+                 **kwargs: Any) -> None:
+        if shape not in REAL_SHAPES:
+            raise ValueError(f"RealPushEnv: shape must be one of {', '.join(REAL_SHAPES)}, got {shape!r}")
+        for fixed in ("friction", "tip_friction", "frame_skip"):
+            if fixed in kwargs:
+                raise ValueError(f"RealPushEnv: {fixed} comes from the fit; pass mujoco_params instead")
+        self.fitted = load_fitted_params(mujoco_params)
+        if dynamics == "fignet" and checkpoint is None:
+            checkpoint = "push-real"
+        super().__init__(dynamics, checkpoint, shape=shape,
+                         friction=self.fitted.get("friction") or DEFAULT_FRICTION,
+                         tip_friction=self.fitted.get("friction_kinematic"),
+                         frame_skip=BUILD_FRAME_SKIP, **{**PUSH_V1_KWARGS, **kwargs})
+        # The fit's solref, cone, frictions and timestep, whatever acts: a planner's MuJoCo model
+        # of this env is then the fitted MuJoCo too (a learned model reads only geometry and the
+        # step's length, still 0.02 s).
+        self.frame_skip = apply_fitted(self.model, self.fitted, STEP_SECONDS)
+        self.dynamics.validate(self.model, self.frame_skip, self.scene_type)
+
+
+class RealPushVectorEnv(PushVectorEnv):
+    """``gym.make_vec("fignet_gym/RealPush-v0", ...)``: ``RealPushEnv`` copies run as one batch."""
+
+    env_class = RealPushEnv
+
+
+__all__ = ["FIT_KEYS", "REAL_SHAPES", "RealPushEnv", "RealPushVectorEnv", "apply_fitted",
+           "fitted_params_path", "load_fitted_params"]

@@ -1,0 +1,72 @@
+"""RealPush-v0: Push-v1's task on the MuJoCo fitted to the real pushes (and push-real)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+
+import fignet_gym.envs  # noqa: F401  (registers the environments)
+from fignet_gym.envs.real_push import STEP_SECONDS, RealPushEnv, load_fitted_params
+from fignet_gym.registration import PUSH_V1_KWARGS
+
+ENV_ID = "fignet_gym/RealPush-v0"
+
+
+def test_check_env_and_seeded_episodes() -> None:
+    env = gym.make(ENV_ID)
+    gym_check_env(env.unwrapped, skip_render_check=True)
+    runs = []
+    for seed in (3, 3, 4):
+        obs0, _ = env.reset(seed=seed)
+        obs1, reward, *_ , info = env.step(np.array([0.5, -0.2]))
+        assert reward == pytest.approx(sum(v for k, v in info.items() if k.startswith("reward_")))
+        runs.append(np.concatenate([obs0, obs1]))
+    np.testing.assert_array_equal(runs[0], runs[1])
+    assert not np.array_equal(runs[0], runs[2])
+    env.close()
+
+
+def test_mujoco_backend_carries_the_fitted_parameters_as_the_replays_do() -> None:
+    """The env's model has exactly what ``ContactParams.apply`` (the sim2real replays) sets on
+    the same scene; a step is 0.02 s; the task is Push-v1's."""
+    import copy
+
+    from fignet_gym.train.analytic import ContactParams
+
+    fit = load_fitted_params()
+    env = RealPushEnv()
+    ref = copy.copy(RealPushEnv(dynamics="mujoco", mujoco_params={}).model)
+    ContactParams.from_json(fit).apply(ref, STEP_SECONDS)
+    for field in ("geom_friction", "geom_solref"):
+        np.testing.assert_array_equal(getattr(env.model, field), getattr(ref, field))
+    for field in ("cone", "impratio", "timestep"):
+        assert getattr(env.model.opt, field) == getattr(ref.opt, field)
+    assert env.frame_skip == fit["substeps"] and env.dt == pytest.approx(STEP_SECONDS)
+    assert env.task.dt == pytest.approx(STEP_SECONDS)
+    assert env.task.success_yaw == pytest.approx(PUSH_V1_KWARGS["success_yaw"])
+
+
+def test_refuses_unknown_shapes_and_parameters_the_fit_sets() -> None:
+    with pytest.raises(ValueError, match="shape"):
+        RealPushEnv(shape="tri3")
+    with pytest.raises(ValueError, match="friction"):
+        RealPushEnv(friction=0.3)
+    with pytest.raises(ValueError, match="unknown keys"):
+        RealPushEnv(mujoco_params={"gravity": -9.8})
+
+
+def test_push_real_ships_with_its_fit_and_drives_the_env() -> None:
+    from fignet_gym import load_pretrained
+    from fignet_gym.pretrained import pretrained_dir, pretrained_path
+
+    sim = load_pretrained("push-real")
+    assert sim.config.scene_type == "push" and sim.config.dt == pytest.approx(STEP_SECONDS)
+    assert pretrained_path("push-real").stat().st_size < 10e6
+    card = (pretrained_dir() / "push-real.md").read_text()
+    assert 'load_pretrained("push-real")' in card and "CPU hours" in card
+    env = RealPushEnv(dynamics="fignet")  # push-real by default
+    env.reset(seed=0)
+    obs, *_ = env.step(np.array([1.0, 0.0]))
+    assert np.isfinite(obs).all()
