@@ -47,6 +47,19 @@ def _read_h5(path: Path, keys: Iterable[str]) -> dict[str, Any]:
         raise DataImportError(f"{path}: not a readable HDF5 file ({err})") from None
 
 
+def read_json_object(path: Path, expected: str) -> dict[str, Any]:
+    """The JSON object in ``path``; :class:`DataImportError` naming the file if it cannot be read
+    or is not an object (``expected`` says what the object should hold)."""
+    try:
+        with open(path) as fh:
+            content = json.load(fh)
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise DataImportError(f"{path}: not a readable JSON file ({err})") from None
+    if not isinstance(content, dict):
+        raise DataImportError(f"{path}: expected a JSON object with {expected}")
+    return content
+
+
 def _expand(paths: Iterable[str | os.PathLike], patterns: Sequence[str]) -> list[Path]:
     """Files of ``paths``: files as given, directories searched recursively for ``patterns``."""
     files: list[Path] = []
@@ -179,13 +192,7 @@ def read_movi_json(path: str | os.PathLike, mesh_map: Mapping[str, str | os.Path
                    **kwargs: Any) -> Trajectory:
     """A Kubric worker's ``metadata.json`` as a trajectory (:func:`movi_record_to_trajectory`)."""
     path = Path(path)
-    try:
-        with open(path) as fh:
-            record = json.load(fh)
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise DataImportError(f"{path}: not a readable JSON file ({err})") from None
-    if not isinstance(record, dict):
-        raise DataImportError(f"{path}: expected a JSON object with field 'instances'")
+    record = read_json_object(path, "field 'instances'")
     traj = movi_record_to_trajectory(record, mesh_map, name=str(path), **kwargs)
     traj.name = path.parent.name if path.name == "metadata.json" else path.stem
     return traj

@@ -10,7 +10,6 @@ the field at fault (:class:`~fignet_gym.data.importers.DataImportError`).
 
 from __future__ import annotations
 
-import json
 import os
 import re
 from collections.abc import Sequence
@@ -21,7 +20,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from fignet_gym.data.importers import DataImportError, _read_h5
+from fignet_gym.data.importers import DataImportError, _read_h5, read_json_object
 from fignet_gym.mjcf import MIT_OBJECTS
 
 #: Sample rate of the pdproc files (Hz).
@@ -149,13 +148,7 @@ def _read_raw(path: Path) -> RawPush:
     info = parse_mit_name(path)
     shape = _check_shape(path, info.shape)
     if path.suffix == ".json":
-        try:
-            with open(path) as fh:
-                content = json.load(fh)
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-            raise DataImportError(f"{path}: not a readable JSON file ({err})") from None
-        if not isinstance(content, dict):
-            raise DataImportError(f"{path}: expected a JSON object with {keys}")
+        content = read_json_object(path, str(keys))
     else:
         content = _read_h5(path, keys)
     for k in keys:
