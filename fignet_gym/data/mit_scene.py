@@ -18,21 +18,15 @@ from collections.abc import Sequence
 import numpy as np
 
 from fignet_gym.data.mit_geometry import REAL_THICKNESS, TIP_RADIUS, polygon_area
-from fignet_gym.mjcf import prism_mesh, yaw_quat
+from fignet_gym.mjcf import prism_mesh
+from fignet_gym.mjcf.assets import friction_attr, mesh_asset
+from fignet_gym.mjcf.push import push_scene_text
 
 #: Height (m) of the tip body's centre above the floor (bottom 1 mm up, half height 0.02 m).
 TIP_Z = 0.021
 _TIP_HALF_HEIGHT = 0.02
 #: Turn (m^2, a cross product) below which three outline points count as collinear.
 _CONVEX_EPS = 1e-12
-
-
-def _fmt(values: np.ndarray | Sequence[float]) -> str:
-    return " ".join(f"{float(v):.9g}" for v in np.asarray(values).ravel())
-
-
-def _ints(values: np.ndarray) -> str:
-    return " ".join(map(str, np.asarray(values).ravel()))
 
 
 def prism_inertia(outline: np.ndarray, mass: float, inertia_z: float,
@@ -106,38 +100,13 @@ def real_push_scene_xml(
         poly = poly[::-1]
     pieces = [prism_mesh(p, thickness) for p in convex_pieces(poly)]
     com, inertia = prism_inertia(poly, mass, inertia_z, thickness)
-    meshes = "\n    ".join(f'<mesh name="object{i}" vertex="{_fmt(v)}" face="{_ints(f)}"/>'
-                            for i, (v, f) in enumerate(pieces))
+    meshes = "\n    ".join(mesh_asset(f"object{i}", v, f) for i, (v, f) in enumerate(pieces))
     geoms = "\n      ".join(f'<geom name="object{i}" type="mesh" mesh="object{i}" friction='
-                            f'"{friction} 0.005 0.0001" solref="{contact_timeconst} 1" '
+                            f'"{friction_attr(friction)}" solref="{contact_timeconst} 1" '
                             'rgba=".75 .35 .2 1"/>' for i in range(len(pieces)))
-    x, y, yaw = (float(v) for v in object_pose)
-    solref = f"{contact_timeconst} 1"
-    return f"""<mujoco model="push_{name}_real">
-  <compiler angle="radian"/>
-  <option timestep="{timestep}" gravity="0 0 -9.81"/>
-  <visual><global offwidth="640" offheight="640"/><quality shadowsize="2048"/></visual>
-  <asset>
-    <texture name="grid" type="2d" builtin="checker" rgb1=".85 .85 .82" rgb2=".7 .7 .68"
-             width="256" height="256"/>
-    <material name="grid" texture="grid" texrepeat="40 40" texuniform="false"/>
-    {meshes}
-  </asset>
-  <worldbody>
-    <light pos="0 0 2" dir="0 0 -1" directional="true"/>
-    <camera name="top" pos="0 0 0.45" xyaxes="1 0 0 0 1 0"/>
-    <geom name="floor" type="plane" size="{floor_half_size} {floor_half_size} 0.05" material="grid"
-          friction="{friction} 0.005 0.0001" priority="1" solref="{solref}"/>
-    <body name="object" pos="{x} {y} {thickness / 2}" quat="{_fmt(yaw_quat(yaw))}">
-      <freejoint name="object"/>
-      <inertial pos="{_fmt(com)}" mass="{mass}" fullinertia="{_fmt(inertia)}"/>
-      {geoms}
-    </body>
-    <body name="tip" mocap="true" pos="{float(tip_xy[0])} {float(tip_xy[1])} {TIP_Z}">
-      <geom name="tip" type="cylinder" size="{tip_radius} {_TIP_HALF_HEIGHT}" priority="1"
-            friction="{friction} 0.005 0.0001" solref="{contact_timeconst} {tip_dampratio}"
-            rgba=".2 .3 .8 1"/>
-    </body>
-  </worldbody>
-</mujoco>
-"""
+    return push_scene_text(
+        f"push_{name}_real", timestep=timestep, meshes=meshes, geoms=geoms, mass=mass, com=com,
+        inertia=inertia, thickness=thickness, object_pose=object_pose, tip_xy=tip_xy, tip_z=TIP_Z,
+        tip_radius=tip_radius, tip_half_height=_TIP_HALF_HEIGHT, floor_half_size=floor_half_size,
+        friction=friction, tip_friction=friction, contact_timeconst=contact_timeconst,
+        tip_dampratio=tip_dampratio)

@@ -40,6 +40,7 @@ from fignet_gym.mjcf.push import (
     PushObject,
     ellipse_outline,
     push_object,
+    push_scene_text,
     push_scene_xml,
 )
 from fignet_gym.mjcf.toss import (
@@ -60,5 +61,6 @@ __all__ = [
     "MATERIALS", "MIT_OBJECTS", "MIT_THICKNESS", "ROLLING_FRICTION", "SIMPLE_SHAPES", "TORSIONAL_FRICTION",
     "TOSS_SHAPES", "MeshOptions",
     "PushObject", "TossObject", "cube_scene_xml", "ellipse_outline", "prism_mesh", "push_object",
-    "push_scene_xml", "restitution_to_dampratio", "toss_scene_xml", "unit_shape_mesh", "yaw_quat",
+    "push_scene_text", "push_scene_xml", "restitution_to_dampratio", "toss_scene_xml", "unit_shape_mesh",
+    "yaw_quat",
 ]

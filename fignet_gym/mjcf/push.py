@@ -167,25 +167,46 @@ def push_scene_xml(
     x, y, yaw = (float(v) for v in object_pose)
     solref = f'{contact_timeconst} 1'
     tip_z = 0.001 + tip_half_height
-    return f"""<mujoco model="push_{shape}">
+    geom = (f'<geom name="object" type="mesh" mesh="object" friction="{friction_attr(friction)}"\n'
+            f'            solref="{solref}" rgba=".75 .35 .2 1"/>')
+    return push_scene_text(
+        f"push_{shape}", timestep=timestep, meshes=mesh_asset("object", verts, faces), geoms=geom,
+        mass=obj.mass, com=com, inertia=inertia, thickness=obj.thickness, object_pose=(x, y, yaw),
+        tip_xy=tip_xy, tip_z=tip_z, tip_radius=tip_radius, tip_half_height=tip_half_height,
+        floor_half_size=floor_half_size, friction=friction, tip_friction=tip_friction,
+        contact_timeconst=contact_timeconst, tip_dampratio=tip_dampratio)
+
+
+def push_scene_text(
+    name: str, *, timestep: float, meshes: str, geoms: str, mass: float, com: np.ndarray,
+    inertia: np.ndarray, thickness: float, object_pose: Sequence[float], tip_xy: Sequence[float],
+    tip_z: float, tip_radius: float, tip_half_height: float, floor_half_size: float,
+    friction: float, tip_friction: float, contact_timeconst: float, tip_dampratio: float,
+) -> str:
+    """MJCF text of a pushing scene: floor, a free ``object`` body holding ``geoms`` (MJCF text of
+    its geoms over the ``meshes`` assets), with ``com float[3]`` and ``inertia float[6]``
+    (full inertia), and the mocap ``tip`` cylinder. Shared by :func:`push_scene_xml` and the
+    real-outline scenes of :mod:`fignet_gym.data.mit_scene`."""
+    x, y, yaw = (float(v) for v in object_pose)
+    solref = f'{contact_timeconst} 1'
+    return f"""<mujoco model="{name}">
   <compiler angle="radian"/>
   <option timestep="{timestep}" gravity="0 0 -9.81"/>
   {visual_header()}
   <asset>
     {GRID_TEXTURE}
     <material name="grid" texture="grid" texrepeat="40 40" texuniform="false"/>
-    {mesh_asset("object", verts, faces)}
+    {meshes}
   </asset>
   <worldbody>
     <light pos="0 0 2" dir="0 0 -1" directional="true"/>
     <camera name="top" pos="0 0 0.45" xyaxes="1 0 0 0 1 0"/>
     <geom name="floor" type="plane" size="{floor_half_size} {floor_half_size} 0.05" material="grid"
           friction="{friction_attr(friction)}" priority="1" solref="{solref}"/>
-    <body name="object" pos="{x} {y} {obj.thickness / 2}" quat="{fmt_numbers(yaw_quat(yaw))}">
+    <body name="object" pos="{x} {y} {thickness / 2}" quat="{fmt_numbers(yaw_quat(yaw))}">
       <freejoint name="object"/>
-      <inertial pos="{fmt_numbers(com)}" mass="{obj.mass}" fullinertia="{fmt_numbers(inertia)}"/>
-      <geom name="object" type="mesh" mesh="object" friction="{friction_attr(friction)}"
-            solref="{solref}" rgba=".75 .35 .2 1"/>
+      <inertial pos="{fmt_numbers(com)}" mass="{mass}" fullinertia="{fmt_numbers(inertia)}"/>
+      {geoms}
     </body>
     <body name="tip" mocap="true" pos="{float(tip_xy[0])} {float(tip_xy[1])} {tip_z}">
       <geom name="tip" type="cylinder" size="{tip_radius} {tip_half_height}" priority="1"
