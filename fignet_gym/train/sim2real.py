@@ -56,8 +56,8 @@ FLOOR_CLEARANCE = 0.01
 PRETRAIN_STEPS = 8000
 #: ``--pretrain``: how each size fine-tunes the pretrained model: a low learning rate and
 #: pushforward from the first step (on 8 real tosses, 1e-4 or plain one-step training first lost
-#: the pretraining's rollouts within 250 steps; docs/experiments.md, Issue 14, "Pretraining on a
-#: fitted MuJoCo").
+#: the pretraining's rollouts within 250 steps; docs/experiments.md, real data,
+#: "Pretraining on a fitted MuJoCo").
 FINETUNE_OVERRIDES: dict[str, Any] = {"training.lr": 3e-5, "training.lr_final": 1e-5,
                                       "training.unroll_after": 0}
 
