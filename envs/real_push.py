@@ -13,13 +13,10 @@ from __future__ import annotations
 
 import json
 import os
-from pathlib import Path
 from typing import Any
 
-import mujoco
-import numpy as np
-
 from fignet_gym.dynamics.base import Dynamics
+from fignet_gym.dynamics.contact_params import ContactParams, fit_path
 from fignet_gym.envs.push import PushEnv, PushVectorEnv
 from fignet_gym.registration import PUSH_V1_KWARGS
 
@@ -33,54 +30,23 @@ DEFAULT_FRICTION = 0.25
 REAL_SHAPES = ("butter", "ellip1", "ellip3", "hex", "rect1")
 
 
-def fitted_params_path() -> Path:
-    """The shipped fitted MuJoCo of the real pushes (next to ``push-real.pt``)."""
-    from fignet_gym.pretrained import pretrained_dir
-
-    return pretrained_dir() / "push-real.mujoco.json"
-
-
-#: Keys of the shipped fit (``fignet_gym.train.analytic.ContactParams`` fields, as ``sim2real``
-#: writes them in ``mujoco_fit.json``'s ``params``) and ``"source"``.
+#: The shipped fit of the real pushes (next to ``push-real.pt``).
+FIT = "mujoco:push-real"
+#: The :class:`ContactParams` fields a fit of the real pushes sets (as ``sim2real`` writes them in
+#: ``mujoco_fit.json``'s ``params``), besides ``"source"``.
 FIT_KEYS = ("friction", "friction_kinematic", "torsional", "rolling", "timeconst", "dampratio",
             "cone", "impratio", "noslip_iterations", "substeps")
 
 
 def load_fitted_params(spec: str | os.PathLike | dict[str, Any] | None = None) -> dict[str, Any]:
     """The fitted parameters (a JSON file or dict of :data:`FIT_KEYS`, plus an optional
-    ``"source"``; default: the shipped :func:`fitted_params_path`); ``ValueError`` on other keys."""
-    raw = spec if isinstance(spec, dict) else json.loads(Path(spec or fitted_params_path()).read_text())
+    ``"source"``; default: the shipped ``mujoco:push-real``); ``ValueError`` on other keys."""
+    raw = spec if isinstance(spec, dict) else json.loads(fit_path(spec or FIT).read_text())
     params = {k: v for k, v in raw.items() if k != "source"}
     unknown = sorted(set(params) - set(FIT_KEYS))
     if unknown:
         raise ValueError(f"RealPushEnv: mujoco_params: unknown keys {unknown}; known: {list(FIT_KEYS)}")
     return params
-
-
-def apply_fitted(model: mujoco.MjModel, params: dict[str, Any], step_seconds: float) -> int:
-    """Set the fitted contact parameters on ``model`` in place, as ``sim2real``'s replays do
-    (friction of the floor and object; ``friction_kinematic`` of the mocap tip; torsional and
-    rolling friction and ``solref`` of every geom; cone, ``impratio``; timestep ``step_seconds /
-    substeps``); returns the substeps per step."""
-    kin = np.array([model.body_mocapid[b] >= 0 for b in model.geom_bodyid])
-    columns = {"friction": (~kin, 0), "friction_kinematic": (kin, 0), "torsional": (slice(None), 1),
-               "rolling": (slice(None), 2)}
-    for key, (rows, col) in columns.items():
-        if params.get(key) is not None:
-            model.geom_friction[rows, col] = params[key]
-    for key, col in (("timeconst", 0), ("dampratio", 1)):
-        if params.get(key) is not None:
-            model.geom_solref[:, col] = params[key]
-    if params.get("cone") is not None:
-        model.opt.cone = (mujoco.mjtCone.mjCONE_ELLIPTIC if params["cone"] == "elliptic"
-                          else mujoco.mjtCone.mjCONE_PYRAMIDAL)
-    if params.get("impratio") is not None:
-        model.opt.impratio = params["impratio"]
-    if params.get("noslip_iterations") is not None:
-        model.opt.noslip_iterations = int(params["noslip_iterations"])
-    substeps = int(params.get("substeps") or max(1, round(step_seconds / model.opt.timestep)))
-    model.opt.timestep = step_seconds / substeps
-    return substeps
 
 
 class RealPushEnv(PushEnv):
@@ -117,7 +83,9 @@ class RealPushEnv(PushEnv):
         # The fit's solref, cone, frictions and timestep, whatever acts: a planner's MuJoCo model
         # of this env is then the fitted MuJoCo too (a learned model reads only geometry and the
         # step's length, still 0.02 s).
-        self.frame_skip = apply_fitted(self.model, self.fitted, STEP_SECONDS)
+        params = ContactParams.from_json(self.fitted, where="RealPushEnv: mujoco_params")
+        params.apply(self.model, STEP_SECONDS)
+        self.frame_skip = params.substeps_for(self.model, STEP_SECONDS)
         self.dynamics.validate(self.model, self.frame_skip, self.scene_type)
 
 
@@ -127,5 +95,4 @@ class RealPushVectorEnv(PushVectorEnv):
     env_class = RealPushEnv
 
 
-__all__ = ["FIT_KEYS", "REAL_SHAPES", "RealPushEnv", "RealPushVectorEnv", "apply_fitted",
-           "fitted_params_path", "load_fitted_params"]
+__all__ = ["FIT", "FIT_KEYS", "REAL_SHAPES", "RealPushEnv", "RealPushVectorEnv", "load_fitted_params"]
