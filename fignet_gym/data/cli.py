@@ -17,7 +17,7 @@ import sys
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
-from fignet_gym.atomic import output_lock
+from fignet_gym.atomic import output_lock, write_text
 from fignet_gym.data.format import TrajectoryFormatError
 
 
@@ -171,9 +171,7 @@ def _write_report(report, path: str | None) -> None:  # report: fignet_gym.data.
         for name in c.still:
             print(f"still (never moves the object): {name}")
     if path:
-        tmp = Path(f"{path}.tmp")  # the data layer stays below fignet_gym.atomic: same recipe
-        tmp.write_text(json.dumps(report.as_json(), indent=1))
-        os.replace(tmp, path)
+        write_text(path, json.dumps(report.as_json(), indent=1))
         print(f"wrote the check to {path}")
 
 
