@@ -106,6 +106,17 @@ def init_distributed() -> tuple[int, int, torch.device]:
     return dist.get_rank(), dist.get_world_size(), device
 
 
+def finish_distributed() -> None:
+    """Leave the process group once every process is done.
+
+    Without it a process that finishes first exits while gloo's threads still serve the others
+    (rank 0 is writing the last checkpoint), and the C++ runtime aborts it (SIGABRT).
+    """
+    if dist.is_available() and dist.is_initialized():
+        dist.barrier()
+        dist.destroy_process_group()
+
+
 #: What ``last.pt``'s metadata must hold for ``--resume``.
 _RESUME_KEYS = ("optimizer", "scheduler", "train_state", "sampler_rng", "noise_rng")
 
@@ -459,4 +470,6 @@ def train_from_files(data: str | Sequence[str], valid: str | None, config: str |
         train_trajs = train_trajs[:max_train]
     valid_trajs = load_trajectories(valid) if valid else train_trajs[-DEFAULT_VALID_COUNT:]
     trainer = Trainer(sim_cfg, cfg, train_trajs, valid_trajs, out_dir, resume=resume, init=init)
-    return trainer.run()
+    state = trainer.run()
+    finish_distributed()
+    return state
