@@ -185,9 +185,9 @@ class PushEnv(MjDynamicsEnv):
             max_lift=(max_lift, "positive"), min_upright=(min_upright, "finite"),
             width=(width, "count"), height=(height, "count"))
         obj = push_object(shape)
-        model = compile_with_history(
-            push_scene_xml(shape, friction=friction, tip_friction=tip_friction)
-        )
+        #: The scene's MJCF (object at the origin; recorded trajectories store their poses).
+        self.mjcf = push_scene_xml(shape, friction=friction, tip_friction=tip_friction)
+        model = compile_with_history(self.mjcf)
         self.shape = shape
         self.max_speed = float(max_speed)
         self.goal_distance, self.goal_yaw = float(goal_distance), float(goal_yaw)

@@ -1,4 +1,5 @@
-"""``fignet-gym`` command line: demo, plan, ppo, ppo-table, bench, train, evaluate, floor, ship, data."""
+"""``fignet-gym`` command line: demo, plan, collect, ppo, ppo-table, bench, train, evaluate, floor,
+ship, data."""
 
 from __future__ import annotations
 
@@ -126,6 +127,17 @@ def _plan(args: argparse.Namespace) -> int:
     return 0
 
 
+def _collect(args: argparse.Namespace) -> int:
+    from fignet_gym.tools.collect import CollectError, collect
+
+    try:
+        collect(args)
+    except CollectError as err:  # a user's error: one line, no traceback
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
 def _demo(args: argparse.Namespace) -> int:
     from fignet_gym.tools.demo import run_demo
 
@@ -149,6 +161,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The full ``fignet-gym`` argument parser."""
     from fignet_gym.data.cli import register as register_data
     from fignet_gym.tools.bench import add_arguments as bench_args
+    from fignet_gym.tools.collect import add_arguments as collect_args
     from fignet_gym.tools.plan import add_arguments as plan_args
 
     p = argparse.ArgumentParser(prog="fignet-gym", description=__doc__)
@@ -167,6 +180,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "success table, summary.json, side-by-side videos")
     plan_args(pl)
     pl.set_defaults(func=_plan)
+    co = sub.add_parser("collect", help="record a planner's episodes, acted in MuJoCo, as "
+                        "training trajectories (on-policy data)")
+    collect_args(co)
+    co.set_defaults(func=_collect)
 
     b = sub.add_parser("bench", help="learned step vs MuJoCo timings")
     bench_args(b)
