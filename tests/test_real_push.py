@@ -70,3 +70,44 @@ def test_push_real_ships_with_its_fit_and_drives_the_env() -> None:
     env.reset(seed=0)
     obs, *_ = env.step(np.array([1.0, 0.0]))
     assert np.isfinite(obs).all()
+
+
+def test_evaluate_scores_the_shipped_push_fit_on_a_users_file(tmp_path) -> None:
+    """``evaluate --against mujoco:push-real`` replays a user's real pushes in the shipped fit:
+    the replay's model carries the fit's tip friction and substeps, and its scores are the
+    shipped parameters' (a different tip friction scores otherwise)."""
+    import json
+    from dataclasses import replace
+    from pathlib import Path
+
+    from sim_factories import zero_simulator
+
+    from fignet_gym.cli import main
+    from fignet_gym.data.format import load_trajectories
+    from fignet_gym.dynamics.contact_params import ContactParams
+    from fignet_gym.pretrained import pretrained_dir
+    from fignet_gym.simulator.checkpoint import save
+    from fignet_gym.train.analytic import Replay, replay_all
+    from fignet_gym.train.evaluation import evaluate
+    from fignet_gym.train.metrics import predictor_metrics
+
+    data, zero = tmp_path / "abs.h5", tmp_path / "zero.pt"
+    sample = Path(__file__).parent / "data" / "mit_sample"
+    assert main(["import-mit", str(sample), "--out", str(data), "--dt", str(STEP_SECONDS)]) == 0
+    save(zero_simulator("push", dt=STEP_SECONDS), zero)
+    res = evaluate(str(zero), str(data), str(tmp_path / "e"), horizon=25, videos=0,
+                   against="mujoco:push-real")
+    shipped = json.loads((pretrained_dir() / "push-real.mujoco.json").read_text())
+    assert res["against"]["params"] == shipped
+    trajs = load_trajectories(data)
+    model = Replay(trajs[0]).model(ContactParams.from_json(shipped))
+    tip = np.array([model.body_mocapid[b] >= 0 for b in model.geom_bodyid])
+    assert tip.any() and (~tip).any()
+    np.testing.assert_allclose(model.geom_friction[tip, 0], shipped["friction_kinematic"])
+    np.testing.assert_allclose(model.geom_friction[~tip, 0], shipped["friction"])
+    assert model.opt.timestep == pytest.approx(STEP_SECONDS / shipped["substeps"])
+    ag = res["against"]
+    for tip_friction, same in ((shipped["friction_kinematic"], True), (1.0, False)):
+        params = replace(ContactParams.from_json(shipped), friction_kinematic=tip_friction)
+        m = predictor_metrics(trajs, replay_all(trajs, params), 3, 25)
+        assert (m["rotation_deg_final"] == pytest.approx(ag["rotation_deg_final"])) == same

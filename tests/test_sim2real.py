@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from fignet_gym.cli import main
-from fignet_gym.data.format import load_trajectories
+from fignet_gym.data.format import load_trajectories, write_trajectories
 from fignet_gym.data.generate import iter_trajectories
 from fignet_gym.data.tracked import import_contactnets, tracked_trajectory
 from fignet_gym.dynamics.contact_params import ContactParams
@@ -155,6 +155,25 @@ def test_sim2real_mujoco_stages_on_the_real_sample(tmp_path: Path, capsys) -> No
     assert main(["sim2real", "--data", str(data), "--out", str(tmp_path / "r3"), "--no-fignet",
                  "--fractions", "0.9", "0.05", "0.05"]) == 2
     assert "too few" in capsys.readouterr().err
+
+
+def test_sim2real_splits_by_recording(tmp_path: Path, capsys) -> None:
+    """sim2real's split is ``split``'s: trajectories sharing ``metadata["file"]`` (windows of one
+    push) count as one recording, and too few recordings are refused before anything is written."""
+    data = tmp_path / "cube.h5"
+    import_contactnets(SAMPLE, data)
+    trajs = load_trajectories(data)
+    files = ["a", "a", "b", "c"]  # 4 trajectories, 3 recordings: 0.5/0.25/0.25 leaves no test
+    shared = tmp_path / "shared.h5"
+    write_trajectories(shared, [replace(t, metadata={**t.metadata, "file": f})
+                                for t, f in zip(trajs, files, strict=True)])
+    argv = ["sim2real", "--data", str(shared), "--out", str(tmp_path / "run"), "--no-fignet",
+            "--fractions", "0.5", "0.25", "0.25"]
+    capsys.readouterr()
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "shared.h5" in err[0] and "from 3 recordings" in err[0]
+    assert not (tmp_path / "run").exists()
 
 
 @pytest.mark.slow
@@ -381,6 +400,9 @@ def test_sim2real_pushing_standin_command_runs_end_to_end(tmp_path: Path) -> Non
     assert {"limit_surface", "noise_floor"} <= set(results)
     table = (out / "table.md").read_text()
     assert "limit surface, fitted" in table and "noise floor" in table
+    sides = [{t.metadata["file"] for t in load_trajectories(out / "split" / f"{s}.h5")}
+             for s in ("train", "valid", "test")]
+    assert not (sides[0] & sides[1] or sides[0] & sides[2] or sides[1] & sides[2])
 
 
 def test_tracking_noise_recovers_known_noise_and_zero_noise_has_no_floor() -> None:

@@ -203,6 +203,54 @@ def test_write_split_files_hold_the_split(tmp_path: Path) -> None:
         assert info[s] == list(getattr(split, s))
 
 
+def _windows(files: list[str | None]) -> list:
+    """One tracked trajectory per entry, its metadata ``file`` the entry (None: no ``file``)."""
+    return [tracked_trajectory(_cube_xml(), {"cube": _track()}, 0.01, name=f"w{i}",
+                               metadata={} if f is None else {"file": f})
+            for i, f in enumerate(files)]
+
+
+def test_split_keeps_the_windows_of_one_recording_on_one_side(tmp_path: Path) -> None:
+    """Windows cut from one push share ``metadata["file"]``: a split by trajectory would put
+    some of a long push's windows in training and others in test (a leak)."""
+    files = ["p0", "p0", "p1", "p2", "p2", "p2", "p3", None, "p4", "p5", "p5", "p6"]
+    write_trajectories(tmp_path / "w.h5", _windows(files))
+    paths = write_split(tmp_path / "w.h5", tmp_path / "s", (0.6, 0.2, 0.2), seed=0)
+    info = json.loads(paths["json"].read_text())
+    side = {}
+    for s in ("train", "valid", "test"):
+        for t in load_trajectories(paths[s]):
+            side.setdefault(t.metadata.get("file", t.name), set()).add(s)
+    assert all(len(v) == 1 for v in side.values()), side
+    assert sorted(info["train"] + info["valid"] + info["test"]) == list(range(len(files)))
+    # the rule by hand: 8 recordings (w7 has no file: its own), in order of first appearance,
+    # permuted by the seed; 5 train, 2 valid, 1 test; a recording's windows in file order
+    members = [[0, 1], [2], [3, 4, 5], [6], [7], [8], [9, 10], [11]]
+    order = np.random.default_rng(0).permutation(8).tolist()
+    expect = [[i for g in order[a:b] for i in members[g]] for a, b in ((0, 5), (5, 7), (7, 8))]
+    assert [info["train"], info["valid"], info["test"]] == expect
+    assert info["grouped_by"] == "file" and sum(map(len, info["recordings"].values())) == 7
+    split = split_indices(len(files), seed=0, groups=files)
+    assert split.groups == 8 and list(split.train) == expect[0]
+    # the same file without the grouping splits p2's three windows (the leak the grouping stops)
+    flat = split_indices(len(files), seed=0)
+    assert len({s for s in ("train", "valid", "test") if {3, 4, 5} & set(getattr(flat, s))}) > 1
+
+
+def test_split_by_recording_with_too_few_recordings_is_a_clear_error(tmp_path: Path,
+                                                                     capsys) -> None:
+    files = ["a"] * 4 + ["b"] * 4 + ["c"] * 2
+    with pytest.raises(SplitError, match=r"w\.h5: 10 trajectories from 3 recordings "
+                                         r"\(metadata 'file'\) are too few.*test \(0 < 1\).*"
+                                         r"need at least 4 recordings"):
+        split_indices(10, where="w.h5", groups=files)
+    write_trajectories(tmp_path / "w.h5", _windows(files))
+    assert _cli("split", str(tmp_path / "w.h5"), "--out", str(tmp_path / "s")) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and "3 recordings" in err[0]
+    assert not (tmp_path / "s").exists()
+
+
 def test_split_refuses_an_existing_split_without_force(tmp_path: Path, capsys) -> None:
     trajs = [tracked_trajectory(_cube_xml(), {"cube": _track()}, 0.01, name=f"t{i}") for i in range(10)]
     write_trajectories(tmp_path / "ten.h5", trajs)

@@ -376,7 +376,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     help="replace the stand-in pushes already in OUT (default: refuse)")
     ms.set_defaults(func=_guarded(_mit_standin))
 
-    sp = subparsers.add_parser("split", help="seeded train/valid/test split of a trajectory file")
+    sp = subparsers.add_parser("split", help="seeded train/valid/test split of a trajectory file, by "
+                                   "recording (windows sharing metadata \"file\" stay together)")
     sp.add_argument("data")
     sp.add_argument("--out", required=True, help="folder for train.h5, valid.h5, test.h5, split.json")
     sp.add_argument("--fractions", type=nonnegative_float, nargs=3, default=[0.6, 0.2, 0.2],

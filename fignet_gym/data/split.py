@@ -1,11 +1,15 @@
 """Seeded train / validation / test splits of a trajectory file (``fignet-gym split``).
 
-The split is stated, not implied: trajectory ``i`` of a file of ``n`` goes to the split its
-position takes in ``numpy.random.default_rng(seed).permutation(n)`` (the first
-``round(f_train n)`` positions train, the next ``round(f_valid n)`` validation, the rest test),
-and the chosen indices and names are written next to the split files (``split.json``). Training
-subsets of size ``k`` are the first ``k`` training trajectories of that order, so a smaller
-subset is always inside a larger one.
+The split is stated, not implied, and made by recording: trajectories whose metadata share a
+``"file"`` value (:data:`GROUP_KEY`: the windows an importer cut from one recorded push) form one
+group, any other trajectory a group of its own, in order of first appearance. Group ``g`` of
+``m`` goes to the split its position takes in ``numpy.random.default_rng(seed).permutation(m)``
+(the first ``round(f_train m)`` positions train, the next ``round(f_valid m)`` validation, the
+rest test), so no recording has trajectories on two sides; with no shared ``"file"`` this is the
+same rule on trajectories. The chosen indices and names are written next to the split files
+(``split.json``). Training subsets of size ``k`` are the first ``k`` training trajectories of
+that order (a group's trajectories in file order), so a smaller subset is always inside a larger
+one.
 """
 
 from __future__ import annotations
@@ -14,7 +18,7 @@ import json
 import math
 import os
 import shutil
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -24,6 +28,9 @@ import numpy as np
 #: Default fractions (train, validation, test).
 DEFAULT_FRACTIONS = (0.6, 0.2, 0.2)
 SPLITS = ("train", "valid", "test")
+#: Trajectory metadata key naming the recording a trajectory was cut from (``import-mit``'s windows
+#: of one push, ``import-contactnets``' tosses): equal values go to the same split.
+GROUP_KEY = "file"
 
 
 class SplitError(ValueError):
@@ -36,7 +43,8 @@ class Split:
 
     Attributes:
         train, valid, test: trajectory indices. seed: the permutation's seed. fractions: as asked.
-        total: trajectories in the file.
+        total: trajectories in the file. groups: recordings they were grouped into (``None``:
+        every trajectory its own).
     """
 
     train: tuple[int, ...]
@@ -45,6 +53,7 @@ class Split:
     seed: int
     fractions: tuple[float, float, float]
     total: int
+    groups: int | None = None
 
     def subset(self, size: int | None) -> tuple[int, ...]:
         """The first ``size`` training indices (all if ``None``); :class:`SplitError` if too few."""
@@ -60,28 +69,69 @@ class Split:
 
 
 def split_indices(n: int, fractions: Sequence[float] = DEFAULT_FRACTIONS, seed: int = 0,
-                  min_sizes: Sequence[int] = (1, 1, 1), where: str = "") -> Split:
+                  min_sizes: Sequence[int] = (1, 1, 1), where: str = "",
+                  groups: Sequence[Hashable | None] | None = None) -> Split:
     """Seeded split of ``n`` trajectories into train / validation / test (see the module doc).
 
-    ``fractions``: three non-negative numbers summing to 1. ``min_sizes``: the fewest trajectories
-    each split may have; fewer raises :class:`SplitError` naming ``where`` (the file).
+    ``fractions``: three non-negative numbers summing to 1, of the groups. ``groups``: one key
+    per trajectory (``str | None``[n]); trajectories with the same key go to the same split,
+    ``None`` (or no ``groups``) is a group of its own. ``min_sizes``: the fewest groups each split
+    may have; fewer raises :class:`SplitError` naming ``where`` (the file).
     """
     f = tuple(float(x) for x in fractions)
     if len(f) != 3 or not all(math.isfinite(x) and x >= 0 for x in f) or abs(sum(f) - 1) > 1e-6:
         raise SplitError(f"--fractions: split fractions must be three finite non-negative numbers "
                          f"summing to 1 (train, valid, test), got {f}")
-    sizes = _sizes(n, f)
-    short = [f"{s} ({k} < {m})" for s, k, m in zip(SPLITS, sizes, min_sizes, strict=True) if k < m]
+    members = _group_members(n, groups)
+    m = len(members)
+    unit = "trajectories" if m == n else f"recordings (metadata {GROUP_KEY!r})"
+    sizes = _sizes(m, f)
+    short = [f"{s} ({k} < {mn})" for s, k, mn in zip(SPLITS, sizes, min_sizes, strict=True) if k < mn]
     if short:
         need = fewest_trajectories(f, min_sizes)
-        enough = (f"these fractions need at least {need} trajectories" if need is not None else
-                  "no number of trajectories is enough: raise the zero fraction")
-        raise SplitError(f"{where or '<data>'}: {n} trajectories are too few for the split {f} "
+        enough = (f"these fractions need at least {need} {unit}" if need is not None else
+                  f"no number of {unit} is enough: raise the zero fraction")
+        count = f"{n} trajectories" if m == n else f"{n} trajectories from {m} {unit}"
+        raise SplitError(f"{where or '<data>'}: {count} are too few for the split {f} "
                          f"(too small: {', '.join(short)}); {enough}")
     n_train, n_valid, _ = sizes
-    order = np.random.default_rng(seed).permutation(n).tolist()
-    return Split(tuple(order[:n_train]), tuple(order[n_train:n_train + n_valid]),
-                 tuple(order[n_train + n_valid:]), int(seed), f, int(n))  # type: ignore[arg-type]
+    order = np.random.default_rng(seed).permutation(m).tolist()
+
+    def take(positions: list[int]) -> tuple[int, ...]:
+        return tuple(i for g in positions for i in members[g])
+
+    return Split(take(order[:n_train]), take(order[n_train:n_train + n_valid]),
+                 take(order[n_train + n_valid:]), int(seed), f, int(n),  # type: ignore[arg-type]
+                 None if m == n else m)
+
+
+def _group_members(n: int, groups: Sequence[Hashable | None] | None) -> list[list[int]]:
+    """Trajectory indices of each group, groups in order of first appearance (``int[m][*]``)."""
+    if groups is None:
+        return [[i] for i in range(n)]
+    if len(groups) != n:
+        raise ValueError(f"groups: {len(groups)} keys for {n} trajectories")
+    members: list[list[int]] = []
+    index: dict[Hashable, int] = {}
+    for i, key in enumerate(groups):
+        if key is None:
+            members.append([i])
+        elif key in index:
+            members[index[key]].append(i)
+        else:
+            index[key] = len(members)
+            members.append([i])
+    return members
+
+
+def trajectory_groups(f: Any) -> list[str | None]:
+    """The :data:`GROUP_KEY` of each trajectory of an open ``TrajectoryFile`` (``None`` where its
+    metadata has none): what :func:`write_split` groups by."""
+    keys: list[str | None] = []
+    for i in range(len(f)):
+        key = f[i].metadata.get(GROUP_KEY)
+        keys.append(None if key is None else str(key))
+    return keys
 
 
 def _sizes(n: int, f: tuple[float, ...]) -> tuple[int, int, int]:
@@ -107,10 +157,22 @@ def fewest_trajectories(fractions: Sequence[float], min_sizes: Sequence[int] = (
     return None
 
 
+def file_split(data: str | os.PathLike, fractions: Sequence[float] = DEFAULT_FRACTIONS,
+               seed: int = 0, min_sizes: Sequence[int] = (1, 1, 1)) -> Split:
+    """The split :func:`write_split` would write for the file ``data``, writing nothing
+    (:class:`SplitError` naming the file if it has too few recordings)."""
+    from fignet_gym.data.format import TrajectoryFile
+
+    with TrajectoryFile(data) as f:
+        return split_indices(len(f), fractions, seed, min_sizes, where=str(data),
+                             groups=trajectory_groups(f))
+
+
 def write_split(data: str | os.PathLike, out: str | os.PathLike,
                 fractions: Sequence[float] = DEFAULT_FRACTIONS, seed: int = 0,
                 min_sizes: Sequence[int] = (1, 1, 1), force: bool = False) -> dict[str, Path]:
-    """Write ``out/{train,valid,test}.h5`` and ``out/split.json`` from one trajectory file.
+    """Write ``out/{train,valid,test}.h5`` and ``out/split.json`` from one trajectory file,
+    grouped by recording (:data:`GROUP_KEY`, see the module doc).
 
     Returns the paths by split name (plus ``"json"``). The files are in split order (training
     file: the seeded order, so ``train --max-train k`` takes :meth:`Split.subset` ``(k)``).
@@ -130,7 +192,8 @@ def write_split(data: str | os.PathLike, out: str | os.PathLike,
                               "pass --force to replace it")
     tmp = out.with_name(f".{out.name}.tmp")
     with TrajectoryFile(data) as f:
-        split = split_indices(len(f), fractions, seed, min_sizes, where=str(data))
+        groups = trajectory_groups(f)
+        split = split_indices(len(f), fractions, seed, min_sizes, where=str(data), groups=groups)
         check_single_scene_type(data)
         names = f.names
         if tmp.exists():  # left by a killed run
@@ -145,6 +208,11 @@ def write_split(data: str | os.PathLike, out: str | os.PathLike,
                         w.add(f[i])
             info = {"data": str(data), **split.to_json(),
                     "names": {s: [names[i] for i in getattr(split, s)] for s in SPLITS}}
+            if split.groups is not None:
+                info["grouped_by"] = GROUP_KEY
+                info["recordings"] = {s: sorted({str(groups[i]) for i in getattr(split, s)
+                                                     if groups[i] is not None})
+                                      for s in SPLITS}
             (tmp / "split.json").write_text(json.dumps(info, indent=1))
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)

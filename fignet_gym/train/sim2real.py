@@ -43,7 +43,7 @@ from typing import Any
 
 from fignet_gym.atomic import write_text
 from fignet_gym.data.guards import check_single_scene_type
-from fignet_gym.data.split import DEFAULT_FRACTIONS, write_split
+from fignet_gym.data.split import DEFAULT_FRACTIONS, file_split, write_split
 from fignet_gym.train.sim2real_report import format_table, headline, plot_sizes, summary_lines
 
 TrainFn = Callable[[Path, Path, "int | None", Path], Path]
@@ -244,6 +244,7 @@ def run_sim2real(
     split_dir = out / "split"
     if not (split_dir / "split.json").is_file():
         check_single_scene_type(data, "--data")  # before anything is written
+        file_split(data, fractions, seed)  # too few recordings: refused here too
     out.mkdir(parents=True, exist_ok=True)
     _write(config_path, run_cfg)
 
