@@ -28,7 +28,7 @@ LOG_STD_RANGE = (-20.0, 2.0)
 #: Largest hidden layer: a policy for a 2-D action needs nothing near this.
 MAX_LAYER = 8192
 #: Observation kinds a run may give its policy (:mod:`~fignet_gym.agents.ppo_features`).
-OBSERVATIONS = ("env", "push-features", "object-frame")
+OBSERVATIONS = ("env", "push-features")
 #: Largest progress-shaping weight: beyond it the shaping dwarfs the env's own reward.
 MAX_SHAPING = 100.0
 #: Largest success bonus: a few hundred steps of the env's largest per-step cost.
@@ -156,9 +156,6 @@ class RunConfig:
             :func:`~fignet_gym.agents.ppo_features.push_features`).
         shaping: weight of the potential-based progress reward added during training
             (:class:`~fignet_gym.agents.ppo_features.ProgressShaping`; 0: none).
-        approach: weight (1/m) of the tip's distance from the pushing point behind the object
-            (the planners' ``approach`` term) in the shaping potential (0: none; needs
-            ``shaping`` > 0, which scales it too).
         success_bonus: extra reward of a successful step during training
             (:class:`~fignet_gym.agents.ppo_features.SuccessBonus`; 0: none). Evaluation and the
             logged returns always use the env's own reward.
@@ -178,17 +175,12 @@ class RunConfig:
     observation: str = "env"
     shaping: float = 0.0
     success_bonus: float = 0.0
-    approach: float = 0.0
 
     def __post_init__(self) -> None:
         if self.observation not in OBSERVATIONS:
             raise ConfigError("observation", f"must be one of {OBSERVATIONS}, got {self.observation!r}")
         if not (_finite(self.shaping) and 0 <= self.shaping <= MAX_SHAPING):
             raise ConfigError("shaping", f"must be a number in [0, {MAX_SHAPING:g}], got {self.shaping!r}")
-        if not (_finite(self.approach) and 0 <= self.approach <= MAX_SHAPING):
-            raise ConfigError("approach", f"must be a number in [0, {MAX_SHAPING:g}], got {self.approach!r}")
-        if self.approach and not self.shaping:
-            raise ConfigError("approach", "needs shaping > 0 (it is a term of the shaping potential)")
         if not (_finite(self.success_bonus) and 0 <= self.success_bonus <= MAX_BONUS):
             raise ConfigError("success_bonus",
                               f"must be a number in [0, {MAX_BONUS:g}], got {self.success_bonus!r}")

@@ -27,7 +27,6 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 
 from fignet_gym.agents.ppo_config import OBSERVATIONS
-from fignet_gym.agents.ppo_frame import N_OBJECT_FRAME, object_frame_observation, object_to_world
 from fignet_gym.envs.tasks import wrap_angle
 
 #: Observation names this module reads (``PushEnv.observation_layout``): slices of the 19 values.
@@ -92,11 +91,9 @@ def push_features(obs: np.ndarray, outline: np.ndarray, tip_radius: float) -> np
 
 @dataclass(frozen=True)
 class ObservationTransform:
-    """The observation a policy acts on, from the env's: ``"env"`` (as it is),
+    """The observation a policy acts on, from the env's: ``"env"`` (as it is) or
     ``"push-features"`` (:func:`push_features` with this object's ``outline float[K, 2]`` and
-    the tip's radius) or ``"object-frame"``
-    (:func:`~fignet_gym.agents.ppo_frame.object_frame_observation`; the policy's actions are then
-    along the object's axes too: :meth:`action`)."""
+    the tip's radius)."""
 
     kind: str = "env"
     outline: tuple[tuple[float, float], ...] = ()
@@ -118,45 +115,26 @@ class ObservationTransform:
 
     def size(self, base: int) -> int:
         """Observation length the policy sees for an env observation of ``base`` values."""
-        if self.kind == "object-frame":
-            return N_OBJECT_FRAME
         return base + (N_FEATURES if self.kind == "push-features" else 0)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         """``float[N, D] -> float32[N, size(D)]``."""
         if self.kind == "env":
             return obs
-        if self.kind == "object-frame":
-            return object_frame_observation(obs, np.asarray(self.outline), self.tip_radius)
         return push_features(obs, np.asarray(self.outline), self.tip_radius)
-
-    def action(self, actions: np.ndarray, obs: np.ndarray) -> np.ndarray:
-        """The env's actions ``float[N, A]`` for the policy's ``actions float[N, A]`` taken on raw
-        observations ``obs float[N, D]``: rotated into the world for ``"object-frame"``
-        (:func:`~fignet_gym.agents.ppo_frame.object_to_world`), else as they are."""
-        return object_to_world(actions, obs) if self.kind == "object-frame" else actions
 
 
 class TransformedObservations(VecEnvWrapper):
-    """SB3 ``VecEnv`` whose observations (and terminal observations) pass through ``transform``
-    and whose actions pass through ``transform.action`` (on the raw observation they answer)."""
+    """SB3 ``VecEnv`` whose observations (and terminal observations) pass through ``transform``."""
 
     def __init__(self, venv: VecEnv, transform: ObservationTransform) -> None:
         n = transform.size(venv.observation_space.shape[0])
         super().__init__(venv, observation_space=spaces.Box(-np.inf, np.inf, (n,), np.float32))
         self.transform = transform
-        self.raw: np.ndarray | None = None
 
     def reset(self) -> np.ndarray:
         """Reset every sub-environment; transformed first observations."""
-        self.raw = self.venv.reset()
-        return self.transform(self.raw)
-
-    def step_async(self, actions: np.ndarray) -> None:
-        """Send the env the actions the policy's ``actions float[N, A]`` stand for."""
-        if self.raw is None:
-            raise RuntimeError("TransformedObservations: step before reset")
-        self.venv.step_async(self.transform.action(actions, self.raw))
+        return self.transform(self.venv.reset())
 
     def step_wait(self) -> VecEnvStepReturn:
         """Step; transformed observations and ``info["terminal_observation"]``."""
@@ -164,28 +142,16 @@ class TransformedObservations(VecEnvWrapper):
         for info in infos:
             if "terminal_observation" in info:
                 info["terminal_observation"] = self.transform(info["terminal_observation"][None])[0]
-        self.raw = obs
         return self.transform(obs), rewards, dones, infos
 
 
-def progress_potential(obs: np.ndarray, position_weight: float, orientation_weight: float,
-                       approach_weight: float = 0.0, outline: np.ndarray | None = None,
-                       tip_radius: float = 0.0) -> np.ndarray:
-    """``phi = -(position_weight * |goal - object| + orientation_weight * |heading error|
-    + approach_weight * |pushing point - tip|)``: ``float[N, 19] -> float[N]``; its first two
-    terms are minus the env's own position and heading cost, the third the planners'
-    ``approach`` term (:func:`pushing_point` of ``outline float[K, 2]``; needed when
-    ``approach_weight`` is not 0)."""
+def progress_potential(obs: np.ndarray, position_weight: float, orientation_weight: float) -> np.ndarray:
+    """``phi = -(position_weight * |goal - object| + orientation_weight * |heading error|)``:
+    ``float[N, 19] -> float[N]``, minus the env's own position and heading cost."""
     obs = np.asarray(obs, dtype=np.float64)
     pos = np.linalg.norm(obs[:, GOAL_XY] - obs[:, OBJECT_XY], axis=-1)
     yaw = np.abs(wrap_angle(_heading(obs[:, GOAL_YAW]) - _heading(obs[:, OBJECT_YAW])))
-    phi = -(position_weight * pos + orientation_weight * yaw)
-    if approach_weight:
-        if outline is None:
-            raise ValueError("progress_potential: approach_weight needs the object's outline")
-        reach = np.linalg.norm(pushing_point(obs, outline, tip_radius) - obs[:, TIP_XY], axis=-1)
-        phi = phi - approach_weight * reach
-    return phi
+    return -(position_weight * pos + orientation_weight * yaw)
 
 
 class ProgressShaping(VecEnvWrapper):
@@ -198,18 +164,13 @@ class ProgressShaping(VecEnvWrapper):
         venv: the env's SB3 view, below any observation transform (it reads raw observations).
         gamma: PPO's discount. weight: scale of the shaping term.
         position_weight, orientation_weight: the env's reward weights (1/m, 1/rad).
-        approach_weight: weight (1/m, before ``weight``) of the tip's distance from the pushing
-            point behind the object (0: none); ``outline float[K, 2]`` and ``tip_radius``: the
-            object's and the tip's geometry it is measured with.
     """
 
     def __init__(self, venv: VecEnv, gamma: float, weight: float, position_weight: float,
-                 orientation_weight: float, approach_weight: float = 0.0,
-                 outline: np.ndarray | None = None, tip_radius: float = 0.0) -> None:
+                 orientation_weight: float) -> None:
         super().__init__(venv)
         self.gamma, self.weight = float(gamma), float(weight)
-        self.weights = (float(position_weight), float(orientation_weight), float(approach_weight),
-                        outline, float(tip_radius))
+        self.weights = (float(position_weight), float(orientation_weight))
         self.phi = np.zeros(venv.num_envs)
 
     def reset(self) -> np.ndarray:

@@ -45,10 +45,7 @@ class NormalizedPolicy:
         """Actions ``float32[N, A]`` for raw observations ``float32[N, D]``."""
         obs = observation if self.transform is None else self.transform(observation)
         obs = obs if self.normalizer is None else self.normalizer.normalize_obs(obs)
-        actions, state = self.model.predict(obs, state, episode_start, deterministic)
-        if self.transform is not None:
-            actions = self.transform.action(actions, observation)
-        return actions, state
+        return self.model.predict(obs, state, episode_start, deterministic)
 
 
 def load_normalizer(path: Path) -> VecNormalize | None:

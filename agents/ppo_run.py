@@ -122,7 +122,7 @@ def _train_env(cfg: RunConfig) -> tuple[VecNormalize, ObservationTransform]:
     if cfg.shaping:
         task = first.task
         vec = ProgressShaping(vec, cfg.ppo.gamma, cfg.shaping, task.position_weight,
-                              task.orientation_weight, cfg.approach, task.outline, task.tip_radius)
+                              task.orientation_weight)
     if cfg.success_bonus:
         vec = SuccessBonus(vec, cfg.success_bonus)
     if cfg.observation != "env":

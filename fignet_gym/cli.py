@@ -258,13 +258,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --use-sde: new noise weights every N steps (-1: once per rollout)")
     o.add_argument("--no-normalize", action="store_true",
                    help="no VecNormalize of observations and rewards")
-    o.add_argument("--observation", choices=["env", "push-features", "object-frame"], default="env",
+    o.add_argument("--observation", choices=["env", "push-features"], default="env",
                    help="what the policy sees: the env's observation, or it and the pushing geometry")
     o.add_argument("--shaping", type=float, default=0.0,
                    help="weight of the potential-based progress reward during training (0: none)")
-    o.add_argument("--approach", type=float, default=0.0,
-                   help="with --shaping: weight (1/m) of the tip's distance from the pushing point "
-                        "in the shaping potential (0: none)")
     o.add_argument("--success-bonus", type=float, default=0.0,
                    help="extra reward of a successful step during training (0: none)")
     o.add_argument("--eval-every", type=int, default=25_000,

@@ -130,20 +130,3 @@ def test_success_bonus_is_added_on_successful_steps_only() -> None:
     assert infos[0]["is_success"] and dones[0] and not infos[1]["is_success"]
     assert rewards[0] == pytest.approx(env_r[0] + 5.0, abs=1e-5)
     assert rewards[1] == pytest.approx(env_r[1], abs=1e-5)
-
-
-def test_approach_term_is_the_planners_approach_distance() -> None:
-    """With ``approach_weight`` the potential drops by it times the tip's distance from the
-    task's own pushing point (``PushTask.approach_distance`` on the state)."""
-    env = gym.make(PUSH)
-    u = env.unwrapped
-    obs, _ = env.reset(seed=5)
-    for _ in range(12):
-        obs, *_ = env.step(np.array([0.7, 0.4]))
-    base = progress_potential(obs[None], 10.0, 1.0)[0]
-    with_approach = progress_potential(obs[None], 10.0, 1.0, 30.0, u.task.outline, u.task.tip_radius)[0]
-    distance = float(u.task.approach_distance(u.get_state(), u.goal))
-    assert distance > 0.005  # the tip has left the pushing point: the term is not trivially 0
-    assert with_approach == pytest.approx(base - 30.0 * distance, abs=1e-5)
-    with pytest.raises(ValueError, match="outline"):
-        progress_potential(obs[None], 10.0, 1.0, 30.0)

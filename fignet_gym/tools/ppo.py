@@ -22,7 +22,6 @@ OPTIONS = {
     "eval_episodes": "--eval-episodes", "final_episodes": "--final-episodes",
     "checkpoint_every": "--checkpoint-every", "observation": "--observation", "shaping": "--shaping",
     "success_bonus": "--success-bonus", "sde_sample_freq": "--sde-sample-freq",
-    "approach": "--approach",
 }
 
 
@@ -68,7 +67,6 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
             observation=args.observation,
             shaping=args.shaping,
             success_bonus=args.success_bonus,
-            approach=args.approach,
         )
     except ConfigError as err:
         raise ValueError(f"{OPTIONS.get(err.setting, err.setting)} {err.detail}") from None
