@@ -27,10 +27,11 @@ import numpy as np
 from stable_baselines3 import PPO
 
 import fignet_gym.envs  # noqa: F401  (registers the environments)
+from fignet_gym.agents.ppo_eval import EVAL_SEED
 from fignet_gym.agents.ppo_policy import NormalizedPolicy, load_normalizer, load_run_policy, run_transform
 from fignet_gym.agents.ppo_rundir import CHECKPOINT, MODEL, NORMALIZER, saved_config
+from fignet_gym.atomic import write_text
 
-EVAL_SEED = 10_000
 #: A contact this many steps before the end or fewer counts as "still pushing".
 RECENT = 10
 
@@ -69,7 +70,7 @@ def episode(env: gym.Env, policy: NormalizedPolicy, seed: int) -> dict:
         contact.append(touching(env))
         rewards.append({k: v for k, v in info.items() if k.startswith("reward_")})
         done = term or trunc
-    tol_p, tol_y = u.task.success_position, u.task.success_yaw
+    tol_p = u.task.success_position
     n = len(pos)
     touched = np.flatnonzero(contact)
     if info["is_success"]:
@@ -122,7 +123,7 @@ def main() -> None:
                                   for k in eps[0]["reward_terms"]},
     }
     print(json.dumps(summary, indent=1))
-    (out / "diagnosis.json").write_text(json.dumps({**summary, "episodes_detail": eps}))
+    write_text(out / "diagnosis.json", json.dumps({**summary, "episodes_detail": eps}))
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
