@@ -70,6 +70,25 @@ def test_median_ratio_interval_brackets_known_ratios() -> None:
     assert all(math.isnan(x) for x in median_ratio_interval(np.zeros(0), np.zeros(0)))
 
 
+def test_grouped_bootstrap_resamples_whole_recordings() -> None:
+    rng = np.random.default_rng(3)
+    model, ref = rng.uniform(0.5, 2.0, 15), rng.uniform(0.5, 2.0, 15)
+    plain = median_ratio_interval(model, ref)
+    # One trajectory per group (or no label at all) is the plain bootstrap, draw for draw.
+    assert median_ratio_interval(model, ref, groups=[f"r{i}" for i in range(15)]) == plain
+    assert median_ratio_interval(model, ref, groups=[None] * 15) == plain
+    # Every recording cut into 4 identical windows: resampling recordings sees 15 independent
+    # units, exactly the original data's interval; resampling windows would pretend 60 and
+    # narrow it.
+    copies, labels = np.repeat(model, 4), np.repeat(np.arange(15), 4).tolist()
+    grouped = median_ratio_interval(copies, np.repeat(ref, 4), groups=labels)
+    assert grouped == pytest.approx(plain)
+    naive = median_ratio_interval(copies, np.repeat(ref, 4))
+    assert naive[1] - naive[0] < 0.8 * (plain[1] - plain[0])
+    with pytest.raises(ValueError, match="labels"):
+        median_ratio_interval(model, ref, groups=["a"])
+
+
 def test_rotation_gain_hand_cases() -> None:
     def about(axis: int, deg: float) -> torch.Tensor:  # pose at the origin, turned about an axis
         q = torch.zeros(7)

@@ -125,8 +125,9 @@ def _group_members(n: int, groups: Sequence[Hashable | None] | None) -> list[lis
 
 
 def trajectory_groups(f: Any) -> list[str | None]:
-    """The :data:`GROUP_KEY` of each trajectory of an open ``TrajectoryFile`` (``None`` where its
-    metadata has none): what :func:`write_split` groups by."""
+    """The :data:`GROUP_KEY` of each trajectory of an open ``TrajectoryFile`` or a list of
+    trajectories (``None`` where its metadata has none): what :func:`write_split` groups by, and
+    what bootstrap intervals resample (``train.stats``)."""
     keys: list[str | None] = []
     for i in range(len(f)):
         key = f[i].metadata.get(GROUP_KEY)

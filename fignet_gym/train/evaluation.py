@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from fignet_gym.data.format import Trajectory, build_scene, load_trajectories
+from fignet_gym.data.split import trajectory_groups
 from fignet_gym.dynamics.contact_params import SHIPPED_PREFIX, ContactParams, fit_path
 from fignet_gym.pretrained import load_pretrained
 from fignet_gym.simulator.model import LearnedSimulator
@@ -133,7 +134,7 @@ def evaluate(checkpoint: str, data: str, out: str, num: int | None = None, horiz
         else:
             ref = rollout_metrics(other, trajs, horizon=horizon)
             who = {"checkpoint": str(against)}
-        res["against"] = {**who, "ratios": paired_ratios(res, ref),
+        res["against"] = {**who, "ratios": paired_ratios(res, ref, trajectory_groups(trajs)),
                           **{k: ref[k] for k in ("translation_rmse_final", "rotation_deg_final",
                                                  "translation_rmse_last", "rotation_deg_last")}}
     (outdir / "metrics.json").write_text(json.dumps(res, indent=2))

@@ -2,12 +2,15 @@
 
 Trajectories are resampled with replacement (in pairs when two predictors are compared on the
 same trajectories), so an interval says how much a median ratio moves with the sample of
-trajectories, not with the randomness of one model.
+trajectories, not with the randomness of one model. Trajectories cut from one recording (the
+windows of one real push share ``metadata["file"]``) are not independent: given their groups,
+whole recordings are resampled (a cluster bootstrap), else the interval is too narrow.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Hashable, Sequence
 from typing import Any
 
 import numpy as np
@@ -18,24 +21,58 @@ BOOTSTRAP_DRAWS = 2000
 INTERVAL_PERCENTILES = (2.5, 97.5)
 
 
-def median_ratio_interval(model: np.ndarray, ref: np.ndarray, draws: int = BOOTSTRAP_DRAWS, seed: int = 0
-                          ) -> list[float]:
+def median_ratio_interval(model: np.ndarray, ref: np.ndarray, draws: int = BOOTSTRAP_DRAWS, seed: int = 0,
+                          groups: Sequence[Hashable | None] | None = None) -> list[float]:
     """Bootstrap 95% interval of ``median(model) / median(ref)`` over trajectories (``float[B]``
     each, resampled in pairs). With ~100 trajectories a median ratio of small errors (a pushed
-    object's yaw) is uncertain by tens of percent; the interval says how much."""
+    object's yaw) is uncertain by tens of percent; the interval says how much.
+
+    ``groups`` (``B`` labels; ``None`` a group of its own): resample whole groups of ``G``,
+    ``G`` at a time. With one trajectory per group this is the plain bootstrap, draw for draw.
+    """
     if model.shape[0] == 0:
         return [math.nan, math.nan]
-    idx = np.random.default_rng(seed).integers(0, model.shape[0], (draws, model.shape[0]))
-    den = np.median(ref[idx], axis=1)
-    ratios = np.median(model[idx], axis=1) / np.where(den > 0, den, np.nan)
+    rng = np.random.default_rng(seed)
+    if groups is None:
+        idx = rng.integers(0, model.shape[0], (draws, model.shape[0]))
+        den = np.median(ref[idx], axis=1)
+        ratios = np.median(model[idx], axis=1) / np.where(den > 0, den, np.nan)
+    else:
+        members = group_members(groups, model.shape[0])
+        picks = rng.integers(0, len(members), (draws, len(members)))
+        ratios = np.empty(draws)
+        for d in range(draws):
+            idx = np.concatenate([members[g] for g in picks[d]])
+            den = np.median(ref[idx])
+            ratios[d] = np.median(model[idx]) / den if den > 0 else np.nan
     lo, hi = np.nanpercentile(ratios, INTERVAL_PERCENTILES)
     return [float(lo), float(hi)]
 
 
-def paired_ratios(res: dict[str, Any], ref: dict[str, Any]) -> dict[str, Any]:
+def group_members(groups: Sequence[Hashable | None], n: int) -> list[np.ndarray]:
+    """Indices ``int[k]`` of each group's trajectories, groups in order of first appearance;
+    a ``None`` label is a group of its own."""
+    if len(groups) != n:
+        raise ValueError(f"groups: {len(groups)} labels for {n} trajectories")
+    index: dict[Hashable, int] = {}
+    members: list[list[int]] = []
+    for i, g in enumerate(groups):
+        if g is None:
+            members.append([i])
+            continue
+        if g not in index:
+            index[g] = len(members)
+            members.append([])
+        members[index[g]].append(i)
+    return [np.asarray(m) for m in members]
+
+
+def paired_ratios(res: dict[str, Any], ref: dict[str, Any],
+                  groups: Sequence[Hashable | None] | None = None) -> dict[str, Any]:
     """Ratios of two models' median errors on the same trajectories (of the ``*_final`` and
     ``*_last`` medians that :func:`score_rollouts` reports), with bootstrap 95% intervals
-    (trajectories resampled in pairs): ``{"translation_rmse": [ratio, lo, hi], "rotation_deg":
+    (trajectories resampled in pairs; whole ``groups`` if given, see
+    :func:`median_ratio_interval`): ``{"translation_rmse": [ratio, lo, hi], "rotation_deg":
     [...], "translation_rmse_last": [...], "rotation_deg_last": [...]}``.
     """
     out: dict[str, Any] = {}
@@ -49,5 +86,5 @@ def paired_ratios(res: dict[str, Any], ref: dict[str, Any]) -> dict[str, Any]:
                 raise ValueError(f"paired ratios need the same trajectories ({a.shape} vs {b.shape})")
             den = ref[f"{q}_{at}"]
             out[f"{q}{suffix}"] = [res[f"{q}_{at}"] / den if den > 0 else math.nan,
-                                   *median_ratio_interval(a, b)]
+                                   *median_ratio_interval(a, b, groups=groups)]
     return out
