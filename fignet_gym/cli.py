@@ -116,26 +116,27 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def _plan(args: argparse.Namespace) -> int:
-    from fignet_gym.tools.plan import PlanError, run
-
+def _one_line_errors(run: Callable[[argparse.Namespace], object], user_error: type[Exception],
+                     args: argparse.Namespace) -> int:
+    """``run(args)``; a ``user_error`` is one ``error:`` line and exit 2, never a traceback."""
     try:
         run(args)
-    except PlanError as err:  # a user's error: one line, no traceback
+    except user_error as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     return 0
+
+
+def _plan(args: argparse.Namespace) -> int:
+    from fignet_gym.tools.plan import PlanError, run
+
+    return _one_line_errors(run, PlanError, args)
 
 
 def _collect(args: argparse.Namespace) -> int:
     from fignet_gym.tools.collect import CollectError, collect
 
-    try:
-        collect(args)
-    except CollectError as err:  # a user's error: one line, no traceback
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    return 0
+    return _one_line_errors(collect, CollectError, args)
 
 
 def _demo(args: argparse.Namespace) -> int:
