@@ -85,7 +85,7 @@ def test_grouped_bootstrap_resamples_whole_recordings() -> None:
     assert grouped == pytest.approx(plain)
     naive = median_ratio_interval(copies, np.repeat(ref, 4))
     assert naive[1] - naive[0] < 0.8 * (plain[1] - plain[0])
-    with pytest.raises(ValueError, match="labels"):
+    with pytest.raises(ValueError, match="1 keys for 15 trajectories"):
         median_ratio_interval(model, ref, groups=["a"])
 
 

@@ -82,7 +82,7 @@ def split_indices(n: int, fractions: Sequence[float] = DEFAULT_FRACTIONS, seed: 
     if len(f) != 3 or not all(math.isfinite(x) and x >= 0 for x in f) or abs(sum(f) - 1) > 1e-6:
         raise SplitError(f"--fractions: split fractions must be three finite non-negative numbers "
                          f"summing to 1 (train, valid, test), got {f}")
-    members = _group_members(n, groups)
+    members = group_members(n, groups)
     m = len(members)
     unit = "trajectories" if m == n else f"recordings (metadata {GROUP_KEY!r})"
     sizes = _sizes(m, f)
@@ -105,8 +105,10 @@ def split_indices(n: int, fractions: Sequence[float] = DEFAULT_FRACTIONS, seed: 
                  None if m == n else m)
 
 
-def _group_members(n: int, groups: Sequence[Hashable | None] | None) -> list[list[int]]:
-    """Trajectory indices of each group, groups in order of first appearance (``int[m][*]``)."""
+def group_members(n: int, groups: Sequence[Hashable | None] | None) -> list[list[int]]:
+    """Trajectory indices of each group, groups in order of first appearance (``int[m][*]``);
+    a ``None`` key (or no ``groups``) is a group of its own. Used by the split and by the
+    bootstrap over recordings (``train.stats``)."""
     if groups is None:
         return [[i] for i in range(n)]
     if len(groups) != n:

@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from fignet_gym.data.split import group_members
+
 #: Bootstrap resamples per interval.
 BOOTSTRAP_DRAWS = 2000
 #: Percentiles of the resampled ratios that bound a 95% interval.
@@ -27,7 +29,7 @@ def median_ratio_interval(model: np.ndarray, ref: np.ndarray, draws: int = BOOTS
     each, resampled in pairs). With ~100 trajectories a median ratio of small errors (a pushed
     object's yaw) is uncertain by tens of percent; the interval says how much.
 
-    ``groups`` (``B`` labels; ``None`` a group of its own): resample whole groups of ``G``,
+    ``groups`` (``B`` keys; ``None`` a group of its own): resample whole groups of ``G``,
     ``G`` at a time. With one trajectory per group this is the plain bootstrap, draw for draw.
     """
     if model.shape[0] == 0:
@@ -38,7 +40,7 @@ def median_ratio_interval(model: np.ndarray, ref: np.ndarray, draws: int = BOOTS
         den = np.median(ref[idx], axis=1)
         ratios = np.median(model[idx], axis=1) / np.where(den > 0, den, np.nan)
     else:
-        members = group_members(groups, model.shape[0])
+        members = [np.asarray(m) for m in group_members(model.shape[0], groups)]
         picks = rng.integers(0, len(members), (draws, len(members)))
         ratios = np.empty(draws)
         for d in range(draws):
@@ -47,24 +49,6 @@ def median_ratio_interval(model: np.ndarray, ref: np.ndarray, draws: int = BOOTS
             ratios[d] = np.median(model[idx]) / den if den > 0 else np.nan
     lo, hi = np.nanpercentile(ratios, INTERVAL_PERCENTILES)
     return [float(lo), float(hi)]
-
-
-def group_members(groups: Sequence[Hashable | None], n: int) -> list[np.ndarray]:
-    """Indices ``int[k]`` of each group's trajectories, groups in order of first appearance;
-    a ``None`` label is a group of its own."""
-    if len(groups) != n:
-        raise ValueError(f"groups: {len(groups)} labels for {n} trajectories")
-    index: dict[Hashable, int] = {}
-    members: list[list[int]] = []
-    for i, g in enumerate(groups):
-        if g is None:
-            members.append([i])
-            continue
-        if g not in index:
-            index[g] = len(members)
-            members.append([])
-        members[index[g]].append(i)
-    return [np.asarray(m) for m in members]
 
 
 def paired_ratios(res: dict[str, Any], ref: dict[str, Any],
