@@ -148,9 +148,8 @@ def collect(args: argparse.Namespace) -> dict[str, Any]:
     from tqdm import tqdm
 
     import fignet_gym.envs  # noqa: F401  (registers the environments)
-    from fignet_gym.agents import make_planner
-    from fignet_gym.dynamics import MujocoDynamics, make_dynamics
     from fignet_gym.simulator.scene import Scene
+    from fignet_gym.tools.plan import planning_agent
 
     check_arguments(args)
     torch.set_num_threads(1)
@@ -162,12 +161,8 @@ def collect(args: argparse.Namespace) -> dict[str, Any]:
     u = env.unwrapped
     scene = Scene.from_mjmodel(u.model)
     try:
-        if args.dynamics == "mujoco":
-            dyn, model = MujocoDynamics(), None
-        else:
-            dyn = make_dynamics("fignet", args.checkpoint, u.scene_type)
-            model = gym.make(args.env, dynamics=dyn).unwrapped.model
-        planner = make_planner(args.planner, dyn, u.scene_type, env=env, model=model, seed=args.seed)
+        planner = planning_agent(args.env, env, args.planner, args.dynamics, "mujoco",
+                                 args.checkpoint, seed=args.seed)
     except ValueError as err:  # a checkpoint of another scene
         raise CollectError(str(err)) from None
     common = {"source": COLLECTED_SOURCE, "kind": u.scene_type, "env": args.env,

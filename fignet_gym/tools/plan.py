@@ -277,8 +277,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     import torch
 
     import fignet_gym.envs  # noqa: F401  (registers the environments)
-    from fignet_gym.agents import IdleAgent, RandomAgent, make_planner
-    from fignet_gym.dynamics import MujocoDynamics, make_dynamics
+    from fignet_gym.agents import IdleAgent, RandomAgent
     from fignet_gym.envs.tasks import Task
 
     check_arguments(args)
@@ -297,28 +296,16 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if not isinstance(getattr(env.unwrapped, "task", None), Task):
         raise PlanError(f"--env: {args.env} exposes no task to plan (env.task: a "
                         f"fignet_gym.envs.tasks.Task); {type(env.unwrapped).__name__} has none")
-    scene = env.unwrapped.scene_type
     if args.planner in BASELINES:
         agent: Any = (IdleAgent if args.planner == "idle" else RandomAgent)(seed=args.seed)
         label = f"{args.planner} on {args.env}"
     else:
         try:
-            if args.dynamics == "mujoco":
-                if args.checkpoint:
-                    raise ValueError("--checkpoint only applies to --dynamics fignet")
-                dyn = MujocoDynamics(nthread=args.threads)
-            else:
-                dyn = make_dynamics("fignet", args.checkpoint, scene)
-            # An env whose scene depends on its dynamics (CubeToss: fitted MuJoCo parameters,
-            # the learned model's own nominal scene) plans on the planning dynamics' scene.
-            plan_model = None
-            if args.dynamics != args.act_dynamics:
-                own = gym.make(args.env, dynamics="mujoco" if args.dynamics == "mujoco" else dyn)
-                plan_model = own.unwrapped.model
-            agent = make_planner(
-                args.planner, dyn, scene, env=env, model=plan_model, horizon=args.horizon,
-                population=args.population, iterations=args.iterations,
-                replan_every=args.replan_every, **({"seed": args.seed} if args.seed else {}),
+            agent = planning_agent(
+                args.env, env, args.planner, args.dynamics, args.act_dynamics, args.checkpoint,
+                threads=args.threads, horizon=args.horizon, population=args.population,
+                iterations=args.iterations, replan_every=args.replan_every,
+                **({"seed": args.seed} if args.seed else {}),
             )
         except ValueError as err:  # a checkpoint of another scene, a bad budget
             raise PlanError(str(err)) from None
@@ -367,3 +354,30 @@ def _run_episodes(args: argparse.Namespace, env: Any, agent: Any, label: str,
     print_table(label, rows, summary)
     print(f"wrote {out / 'summary.json'}")
     return summary
+
+
+def planning_agent(env_id: str, env: Any, planner: str, dynamics: str, act_dynamics: str,
+                   checkpoint: str | None = None, threads: int | None = None, **budget: Any) -> Any:
+    """A CEM / MPPI planner for ``env`` (made from ``env_id``, acting in ``act_dynamics``) that
+    plans on ``dynamics`` (``"mujoco"`` or ``"fignet"``, the latter from ``checkpoint``);
+    ``budget`` goes to :func:`make_planner`. ``ValueError`` for a checkpoint of another scene, a
+    checkpoint with MuJoCo, or a bad budget."""
+    import gymnasium as gym
+
+    from fignet_gym.agents import make_planner
+    from fignet_gym.dynamics import MujocoDynamics, make_dynamics
+
+    scene = env.unwrapped.scene_type
+    if dynamics == "mujoco":
+        if checkpoint:
+            raise ValueError("--checkpoint only applies to --dynamics fignet")
+        dyn = MujocoDynamics(nthread=threads)
+    else:
+        dyn = make_dynamics("fignet", checkpoint, scene)
+    # An env whose scene depends on its dynamics (CubeToss: fitted MuJoCo parameters, the
+    # learned model's own nominal scene) plans on the planning dynamics' scene.
+    plan_model = None
+    if dynamics != act_dynamics:
+        own = gym.make(env_id, dynamics="mujoco" if dynamics == "mujoco" else dyn)
+        plan_model = own.unwrapped.model
+    return make_planner(planner, dyn, scene, env=env, model=plan_model, **budget)
