@@ -3,6 +3,7 @@ MuJoCo replaying them from the stored MJCF."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -147,3 +148,47 @@ def test_an_existing_output_is_kept_without_force(tmp_path: Path, capsys: Any) -
     assert main(["collect", "--episodes", "1", "--out", str(out), "--no-progress"]) == 2
     assert "--force" in capsys.readouterr().err
     assert out.read_bytes() == b"keep"
+
+
+#: ``--env-kwargs`` of a variant whose goals sit within this distance (m) of the object, at its
+#: starting heading (Push-v1 draws them 2 to 5 cm away, within 0.3 rad).
+_NEAR = 0.004
+
+
+def test_env_kwargs_reach_the_env(tmp_path: Path, collected: Path) -> None:
+    """The recorded goals are drawn as the given env arguments say (and Push-v1's are not)."""
+    out = tmp_path / "near.h5"
+    kwargs = f'{{"goal_distance_min": 0.0, "goal_distance": {_NEAR}, "goal_yaw": 0.0}}'
+    assert main(["collect", "--episodes", "2", "--seed", "100000", "--env-kwargs", kwargs,
+                 "--out", str(out), "--no-progress"]) == 0
+
+    def offsets(path: Path) -> list[tuple[float, float]]:
+        rows = []
+        for t in load_trajectories(path):
+            obj = t.poses[0, t.names.index("object")]
+            goal = np.asarray(t.metadata["goal"])
+            dyaw = (goal[2] - 2 * np.arctan2(obj[6], obj[3]) + np.pi) % (2 * np.pi) - np.pi
+            rows.append((float(np.linalg.norm(goal[:2] - obj[:2])), float(abs(dyaw))))
+        return rows
+
+    for dist, dyaw in offsets(out):
+        assert dist <= _NEAR + 1e-6 and dyaw < 1e-5
+    assert load_trajectories(out)[0].metadata["env_kwargs"] == json.loads(kwargs)
+    assert all(dist >= 0.02 - 1e-6 for dist, _ in offsets(collected))
+
+
+@pytest.mark.parametrize("kwargs, says", [
+    ("{goal_yaw: 1}", "not JSON"),
+    ("[0.1]", "JSON object"),
+    ('{"goal_yawn": 0.8}', "takes no argument goal_yawn"),
+    ('{"dynamics": "fignet"}', "cannot be set"),
+    ('{"goal_distance_min": 0.06}', "refuses"),
+])
+def test_bad_env_kwargs_are_refused_before_writing(tmp_path: Path, capsys: Any, kwargs: str,
+                                                   says: str) -> None:
+    out = tmp_path / "x.h5"
+    assert main(["collect", "--episodes", "1", "--env-kwargs", kwargs, "--out", str(out),
+                 "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --env-kwargs") and says in err[0]
+    assert not list(tmp_path.iterdir())

@@ -20,6 +20,8 @@ drawn from them.
 from __future__ import annotations
 
 import argparse
+import inspect
+import json
 import math
 import time
 from pathlib import Path
@@ -60,6 +62,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="std of Gaussian noise added to each planned action (action units)")
     p.add_argument("--epsilon", type=float, default=0.0,
                    help="probability of a uniformly random action instead of the plan's")
+    p.add_argument("--env-kwargs", default="{}", metavar="JSON",
+                   help="extra env arguments as a JSON object, e.g. '{\"goal_distance\": 0.02, "
+                   "\"goal_yaw\": 0.8}' (over the registered ones; dynamics is always mujoco)")
     p.add_argument("--out", required=True, help="trajectory file (.h5) to write")
     p.add_argument("--force", action="store_true", help="replace an existing --out")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -73,11 +78,55 @@ def check_arguments(args: argparse.Namespace) -> None:
         raise CollectError(f"--epsilon must be a number in [0, 1], got {args.epsilon}")
     if args.checkpoint and args.dynamics != "fignet":
         raise CollectError("--checkpoint only applies to --dynamics fignet")
+    env_kwargs(args.env_kwargs)
     out = Path(args.out)
     if out.is_dir():
         raise CollectError(f"--out {out}: is a directory; --out must be a file")
     if out.exists() and not args.force:
         raise CollectError(f"--out {out}: already exists; pass --force to replace it")
+
+
+#: Env arguments ``--env-kwargs`` may not set: the episodes are acted in MuJoCo, unrendered.
+_FIXED_ENV_ARGS = ("dynamics", "checkpoint", "dynamics_kwargs", "render_mode", "width", "height")
+
+
+def env_kwargs(text: str) -> dict[str, Any]:
+    """``--env-kwargs``' JSON object as a dict; :class:`CollectError` if it is not one, or sets an
+    argument the episodes fix (:data:`_FIXED_ENV_ARGS`)."""
+    try:
+        kwargs = json.loads(text)
+    except ValueError as err:
+        raise CollectError(f"--env-kwargs: not JSON ({err}); give an object such as "
+                           "'{\"goal_yaw\": 0.8}'") from None
+    if not isinstance(kwargs, dict):
+        raise CollectError(f"--env-kwargs: must be a JSON object of env arguments, got {text!r}")
+    fixed = sorted(set(kwargs) & set(_FIXED_ENV_ARGS))
+    if fixed:
+        raise CollectError(f"--env-kwargs: {', '.join(fixed)} cannot be set (collect acts in "
+                           "MuJoCo, unrendered)")
+    return kwargs
+
+
+def _make_env(env_id: str, kwargs: dict[str, Any]) -> Any:
+    """``gym.make(env_id, dynamics="mujoco", **kwargs)``; :class:`CollectError` for an argument
+    the env's constructor does not take or a value it refuses."""
+    import gymnasium as gym
+
+    cls = gym.spec(env_id).entry_point
+    if isinstance(cls, str):
+        module, name = cls.split(":")
+        cls = getattr(__import__(module, fromlist=[name]), name)
+    params = inspect.signature(cls).parameters
+    if not any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        unknown = sorted(set(kwargs) - set(params))
+        if unknown:
+            allowed = sorted(set(params) - set(_FIXED_ENV_ARGS) - {"self"})
+            raise CollectError(f"--env-kwargs: {env_id} takes no argument {', '.join(unknown)}; "
+                               f"its arguments: {', '.join(allowed)}")
+    try:
+        return gym.make(env_id, dynamics="mujoco", **kwargs)
+    except (TypeError, ValueError) as err:
+        raise CollectError(f"--env-kwargs: {env_id} refuses {json.dumps(kwargs)}: {err}") from None
 
 
 def _recordable(env: Any, env_id: str) -> str:
@@ -156,19 +205,20 @@ def collect(args: argparse.Namespace) -> dict[str, Any]:
     if args.env not in gym.registry:
         ids = sorted(k for k in gym.registry if k.startswith("fignet_gym/"))
         raise CollectError(f"--env: unknown environment {args.env!r}; use one of {ids}")
-    env = gym.make(args.env, dynamics="mujoco")
+    extra = env_kwargs(args.env_kwargs)
+    env = _make_env(args.env, extra)
     xml = _recordable(env, args.env)
     u = env.unwrapped
     scene = Scene.from_mjmodel(u.model)
     try:
         planner = planning_agent(args.env, env, args.planner, args.dynamics, "mujoco",
-                                 args.checkpoint, seed=args.seed)
+                                 args.checkpoint, env_kwargs=extra, seed=args.seed)
     except ValueError as err:  # a checkpoint of another scene
         raise CollectError(str(err)) from None
     common = {"source": COLLECTED_SOURCE, "kind": u.scene_type, "env": args.env,
               "planner": args.planner, "dynamics": args.dynamics, "checkpoint": args.checkpoint,
               "action_noise": args.action_noise, "epsilon": args.epsilon,
-              "shape": getattr(u, "shape", None)}
+              "shape": getattr(u, "shape", None), "env_kwargs": extra}
     file_meta = {**common, "seed": args.seed, "episodes": args.episodes,
                  "mujoco_version": mujoco.__version__}
     rows: list[dict[str, Any]] = []

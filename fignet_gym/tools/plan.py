@@ -357,11 +357,12 @@ def _run_episodes(args: argparse.Namespace, env: Any, agent: Any, label: str,
 
 
 def planning_agent(env_id: str, env: Any, planner: str, dynamics: str, act_dynamics: str,
-                   checkpoint: str | None = None, threads: int | None = None, **budget: Any) -> Any:
-    """A CEM / MPPI planner for ``env`` (made from ``env_id``, acting in ``act_dynamics``) that
-    plans on ``dynamics`` (``"mujoco"`` or ``"fignet"``, the latter from ``checkpoint``);
-    ``budget`` goes to :func:`make_planner`. ``ValueError`` for a checkpoint of another scene, a
-    checkpoint with MuJoCo, or a bad budget."""
+                   checkpoint: str | None = None, threads: int | None = None,
+                   env_kwargs: dict[str, Any] | None = None, **budget: Any) -> Any:
+    """A CEM / MPPI planner for ``env`` (made from ``env_id`` with ``env_kwargs``, acting in
+    ``act_dynamics``) that plans on ``dynamics`` (``"mujoco"`` or ``"fignet"``, the latter from
+    ``checkpoint``); ``budget`` goes to :func:`make_planner`. ``ValueError`` for a checkpoint of
+    another scene, a checkpoint with MuJoCo, or a bad budget."""
     import gymnasium as gym
 
     from fignet_gym.agents import make_planner
@@ -378,6 +379,7 @@ def planning_agent(env_id: str, env: Any, planner: str, dynamics: str, act_dynam
     # learned model's own nominal scene) plans on the planning dynamics' scene.
     plan_model = None
     if dynamics != act_dynamics:
-        own = gym.make(env_id, dynamics="mujoco" if dynamics == "mujoco" else dyn)
+        own = gym.make(env_id, dynamics="mujoco" if dynamics == "mujoco" else dyn,
+                       **(env_kwargs or {}))
         plan_model = own.unwrapped.model
     return make_planner(planner, dyn, scene, env=env, model=plan_model, **budget)
