@@ -168,11 +168,6 @@ class PushGoalVecEnv(VecEnvWrapper):
                     for _ in self._get_indices(indices)]
         return self.venv.env_method(method_name, *method_args, indices=indices, **method_kwargs)
 
-    def _get_indices(self, indices: VecEnvIndices) -> list[int]:
-        if indices is None:
-            return list(range(self.num_envs))
-        return [indices] if isinstance(indices, int) else list(indices)
-
 
 class GoalPolicy:
     """A policy trained on the goal view, acting on the push env's flat observations.
