@@ -8,10 +8,11 @@ function of the two goals alone. :class:`PushGoalVecEnv` gives the push envs (``
 
 | key | values | from the env's observation |
 |---|---|---|
-| ``observation`` | 11: object x, y, cos, sin of its heading, tip x, y, tip in the object frame, object velocity x, y, yaw rate | everything that does not name the goal |
-| ``achieved_goal`` | 4: object x, y, cos, sin of its heading | ``object_xy``, ``object_yaw`` |
-| ``desired_goal`` | 4: goal x, y, cos, sin of its heading | ``goal_xy``, ``goal_yaw`` |
+| ``observation`` | 11 | :data:`OBSERVATION_PARTS` (object pose, tip, tip in the object frame, velocities) |
+| ``achieved_goal`` | 4 | ``object_xy``, ``object_yaw`` (x, y, cos, sin) |
+| ``desired_goal`` | 4 | ``goal_xy``, ``goal_yaw`` (x, y, cos, sin) |
 
+(``observation`` holds nothing that names the goal: HER swaps ``desired_goal`` alone)
 and the reward :class:`GoalReward` computes from those goals: ``"sparse"`` (0 on a success, -1
 otherwise, as in the Fetch tasks) or ``"dense"`` (the env's own reward without its action term).
 Success is the env's own rule (position and heading errors below the task's tolerances).
