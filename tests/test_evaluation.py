@@ -284,3 +284,18 @@ def test_videos_label_recorded_data_as_recorded(pushes: list) -> None:
     with TemporaryDirectory() as tmp:
         import_contactnets(sample, Path(tmp) / "cube.h5")
         assert {truth_label(t) for t in load_trajectories(Path(tmp) / "cube.h5")} == {"recorded"}
+
+
+def test_no_motion_intervals_resample_whole_recordings() -> None:
+    # Three identical windows per recording: the interval over recordings is the interval of one
+    # window each (5 independent units); resampling the 15 windows would narrow it.
+    sim = quiet_simulator("push")
+    originals = list(iter_trajectories("push", 5, seed=12))
+    windows = [replace(t, metadata={**t.metadata, "file": f"push{i}"})
+               for i, t in enumerate(originals) for _ in range(3)]
+    once = rollout_metrics(sim, originals, horizon=25)
+    grouped = rollout_metrics(sim, windows, horizon=25)
+    naive = rollout_metrics(sim, [replace(t, metadata={}) for t in windows], horizon=25)
+    for key in ("translation_rmse_ratio_still_ci95", "rotation_deg_last_ratio_still_ci95"):
+        assert grouped[key] == pytest.approx(once[key], rel=1e-3)
+        assert naive[key][1] - naive[key][0] < 0.9 * (once[key][1] - once[key][0])

@@ -53,7 +53,8 @@ def rollout_metrics(sim: LearnedSimulator, trajs: list[Trajectory], scenes: list
     scenes = scenes or [build_scene(t, sim.config.mesh_options) for t in trajs]
     preds, edges, secs = learned_rollouts(sim, trajs, scenes, batch)
     trues = [torch.as_tensor(t.poses, dtype=torch.float32) for t in trajs]
-    out = score_rollouts(scenes, trues, preds, H, horizon, [t.name for t in trajs])
+    out = score_rollouts(scenes, trues, preds, H, horizon, [t.name for t in trajs],
+                         trajectory_groups(trajs))
     out.update(seconds=horizon * sim.config.dt, dt=sim.config.dt, ms_per_step_batched=1000 * secs,
                collision_edges_per_step=float(np.mean(edges)) if edges else math.nan)
     one: dict[str, Any] = {}

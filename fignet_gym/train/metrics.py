@@ -25,6 +25,7 @@ import torch
 from torch import Tensor
 
 from fignet_gym.data.format import Trajectory, build_scene
+from fignet_gym.data.split import trajectory_groups
 from fignet_gym.simulator.geometry import (
     axis_angle_to_quat,
     quat_angle,
@@ -104,7 +105,8 @@ def _errors_one(scene: Scene, pred: Tensor, true: Tensor) -> tuple[np.ndarray, n
 
 
 def score_rollouts(scenes: list[Scene], trues: list[Tensor], preds: list[Tensor], given: int,
-                   horizon: int = HORIZON, names: list[str] | None = None) -> dict[str, Any]:
+                   horizon: int = HORIZON, names: list[str] | None = None,
+                   groups: list[str | None] | None = None) -> dict[str, Any]:
     """The paper's rollout errors of any predictor, each trajectory over its own length.
 
     Args:
@@ -114,6 +116,8 @@ def score_rollouts(scenes: list[Scene], trues: list[Tensor], preds: list[Tensor]
         horizon: frame (counted from frame 0 of each trajectory) of the ``*_final`` errors.
             Trajectories without that frame are left out of them (counted in
             ``horizon_trajectories``); every trajectory's last frame gives the ``*_last`` errors.
+        groups: one recording key per trajectory (``data.split.trajectory_groups``): the
+            bootstrap intervals resample whole recordings (windows of one push are correlated).
 
     Returns medians over trajectories at the horizon (``*_final``) and at the last frame
     (``*_last``), per-frame median curves (frames ``given`` .. over the trajectories that have
@@ -160,7 +164,9 @@ def score_rollouts(scenes: list[Scene], trues: list[Tensor], preds: list[Tensor]
                 denom = out[f"{ref}_{q}_{at}"]
                 out[f"{q}{suffix}_ratio_{ref}"] = out[f"{q}_{at}"] / denom if denom > 0 else math.nan
             model, still = np.array(per[q][at]), np.array(per[f"still_{q}"][at])
-            out[f"{q}{suffix}_ratio_still_ci95"] = median_ratio_interval(model, still)
+            kept = None if groups is None else (
+                [groups[i] for i in reach] if at == "final" else list(groups))
+            out[f"{q}{suffix}_ratio_still_ci95"] = median_ratio_interval(model, still, groups=kept)
             out[f"{q}{suffix}_per_trajectory"] = per[q][at]
             out[f"still_{q}{suffix}_per_trajectory"] = per[f"still_{q}"][at]
     if names is not None:
@@ -176,7 +182,8 @@ def predictor_metrics(trajs: list[Trajectory], preds: list[np.ndarray], given: i
     scenes = [build_scene(t) for t in trajs]
     trues = [torch.as_tensor(t.poses, dtype=torch.float32) for t in trajs]
     pred_t = [torch.as_tensor(np.asarray(p), dtype=torch.float32) for p in preds]
-    out = score_rollouts(scenes, trues, pred_t, given, horizon, [t.name for t in trajs])
+    out = score_rollouts(scenes, trues, pred_t, given, horizon, [t.name for t in trajs],
+                         trajectory_groups(trajs))
     out.update(seconds=horizon * trajs[0].dt, dt=trajs[0].dt)
     out.update(penetration_summary(scenes, pred_t, trues, given))
     return out
