@@ -118,8 +118,9 @@ Rollouts from the first {c.history + 1} true poses; errors at frame {m["horizon_
 | constant velocity | {m["constvel_translation_rmse_final"]:.4f} | {m["constvel_rotation_deg_final"]:.2f} |
 
 Ratio to no motion: translation {m["translation_rmse_ratio_still"]:.1%}, rotation
-{m["rotation_deg_ratio_still"]:.1%} (bootstrap 95% intervals over the trajectories:
-{_interval(m["translation_rmse_ratio_still_ci95"])} and {_interval(m["rotation_deg_ratio_still_ci95"])}).
+{m["rotation_deg_ratio_still"]:.1%} (bootstrap 95% intervals resampling whole recordings, or
+trajectories where none is named: {_interval(m["translation_rmse_ratio_still_ci95"])} and
+{_interval(m["rotation_deg_ratio_still_ci95"])}).
 Teacher-forced one-step error (summed over steps, divided by the motion over each step; the
 constant-velocity model's in brackets): translation {m["one_step_translation"]:.3f}
 ({m["one_step_constvel_translation"]:.3f}), rotation {m["one_step_rotation"]:.3f}
