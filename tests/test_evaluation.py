@@ -22,7 +22,7 @@ from fignet_gym.simulator.scene import Scene
 from fignet_gym.train.data_checks import truth_label
 from fignet_gym.train.evaluation import evaluate, rollout_metrics
 from fignet_gym.train.floor import perturbation_floor
-from fignet_gym.train.metrics import rotation_gain
+from fignet_gym.train.metrics import predictor_metrics, rotation_gain
 from fignet_gym.train.one_step import one_step_errors, spin_change
 from fignet_gym.train.stats import median_ratio_interval, paired_ratios
 from tests.sim_factories import SMALL, quiet_simulator, zero_simulator
@@ -299,3 +299,17 @@ def test_no_motion_intervals_resample_whole_recordings() -> None:
     for key in ("translation_rmse_ratio_still_ci95", "rotation_deg_last_ratio_still_ci95"):
         assert grouped[key] == pytest.approx(once[key], rel=1e-3)
         assert naive[key][1] - naive[key][0] < 0.9 * (once[key][1] - once[key][0])
+
+
+def test_paired_ratios_of_recordings_shorter_than_the_horizon() -> None:
+    # A recording too short for the horizon drops out of the *_final medians: the pairing must
+    # resample the recordings of the trajectories behind them, not of every trajectory.
+    trajs = [replace(t, metadata={**t.metadata, "file": f"p{i // 2}"})
+             for i, t in enumerate(iter_trajectories("push", 4, seed=3))]
+    trajs[0] = replace(trajs[0], poses=trajs[0].poses[:10])
+    shifted = [t.poses + np.array([1e-3, 0, 0, 0, 0, 0, 0]) for t in trajs]  # 1 mm along x
+    res = predictor_metrics(trajs, shifted, horizon=20)
+    assert res["horizon_trajectories"] == 3 and res["groups_final"] == ["p0", "p1", "p1"]
+    ratios = paired_ratios(res, res)
+    assert ratios["translation_rmse"] == pytest.approx([1.0, 1.0, 1.0])
+    assert ratios["translation_rmse_last"] == pytest.approx([1.0, 1.0, 1.0])

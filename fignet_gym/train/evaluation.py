@@ -135,7 +135,7 @@ def evaluate(checkpoint: str, data: str, out: str, num: int | None = None, horiz
         else:
             ref = rollout_metrics(other, trajs, horizon=horizon)
             who = {"checkpoint": str(against)}
-        res["against"] = {**who, "ratios": paired_ratios(res, ref, trajectory_groups(trajs)),
+        res["against"] = {**who, "ratios": paired_ratios(res, ref),
                           **{k: ref[k] for k in ("translation_rmse_final", "rotation_deg_final",
                                                  "translation_rmse_last", "rotation_deg_last")}}
     (outdir / "metrics.json").write_text(json.dumps(res, indent=2))

@@ -118,6 +118,8 @@ def score_rollouts(scenes: list[Scene], trues: list[Tensor], preds: list[Tensor]
             ``horizon_trajectories``); every trajectory's last frame gives the ``*_last`` errors.
         groups: one recording key per trajectory (``data.split.trajectory_groups``): the
             bootstrap intervals resample whole recordings (windows of one push are correlated).
+            The keys of the trajectories behind each median are returned as ``groups_final`` and
+            ``groups_last``, so :func:`~fignet_gym.train.stats.paired_ratios` pairs them too.
 
     Returns medians over trajectories at the horizon (``*_final``) and at the last frame
     (``*_last``), per-frame median curves (frames ``given`` .. over the trajectories that have
@@ -152,6 +154,8 @@ def score_rollouts(scenes: list[Scene], trues: list[Tensor], preds: list[Tensor]
                            "trajectories": len(trues), "given_poses": given,
                            "steps": max(lengths) - given,
                            "lengths": [min(lengths), int(np.median(lengths)), max(lengths)]}
+    if groups is not None:
+        out["groups_final"], out["groups_last"] = [groups[i] for i in reach], list(groups)
     for key, d in per.items():
         out[f"{key}_final"] = _median(d["final"])
         out[f"{key}_last"] = _median(d["last"])
@@ -164,9 +168,8 @@ def score_rollouts(scenes: list[Scene], trues: list[Tensor], preds: list[Tensor]
                 denom = out[f"{ref}_{q}_{at}"]
                 out[f"{q}{suffix}_ratio_{ref}"] = out[f"{q}_{at}"] / denom if denom > 0 else math.nan
             model, still = np.array(per[q][at]), np.array(per[f"still_{q}"][at])
-            kept = None if groups is None else (
-                [groups[i] for i in reach] if at == "final" else list(groups))
-            out[f"{q}{suffix}_ratio_still_ci95"] = median_ratio_interval(model, still, groups=kept)
+            out[f"{q}{suffix}_ratio_still_ci95"] = median_ratio_interval(
+                model, still, groups=out.get(f"groups_{at}"))
             out[f"{q}{suffix}_per_trajectory"] = per[q][at]
             out[f"still_{q}{suffix}_per_trajectory"] = per[f"still_{q}"][at]
     if names is not None:

@@ -25,7 +25,6 @@ from typing import Any
 import numpy as np
 
 from fignet_gym.data.format import Trajectory
-from fignet_gym.data.split import trajectory_groups
 
 #: The limit-surface grid: pusher-object friction and factor on the uniform-pressure radius.
 LS_FRICTIONS = (0.05, 0.1, 0.2, 0.3, 0.45, 0.65, 0.9, 1.3, 2.0, 3.0, 5.0)
@@ -190,7 +189,7 @@ def run_stages(out: Any, train: Sequence[Trajectory], test: Sequence[Trajectory]
         print(f"{name.replace('_', ' ')} on the test split ...")
         r = run()
         if name == "limit_surface":
-            r["vs_fitted_mujoco"] = paired_ratios(r, fitted, trajectory_groups(test))
+            r["vs_fitted_mujoco"] = paired_ratios(r, fitted)
         write_text(path, json.dumps(r, indent=1, default=float))
         res[name] = r
     return res

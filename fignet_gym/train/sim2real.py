@@ -43,7 +43,7 @@ from typing import Any
 
 from fignet_gym.atomic import write_text
 from fignet_gym.data.guards import check_single_scene_type
-from fignet_gym.data.split import DEFAULT_FRACTIONS, file_split, trajectory_groups, write_split
+from fignet_gym.data.split import DEFAULT_FRACTIONS, file_split, write_split
 from fignet_gym.train.sim2real_report import format_table, headline, plot_sizes, summary_lines
 
 TrainFn = Callable[[Path, Path, "int | None", Path], Path]
@@ -324,7 +324,7 @@ def run_sim2real(
                 res["checkpoint"] = str(ckpt)
                 res["recipe"] = run_cfg["recipe"]
                 res["training_trajectories"] = size if size is not None else n_train
-                res["vs_fitted_mujoco"] = paired_ratios(res, fitted, trajectory_groups(test))
+                res["vs_fitted_mujoco"] = paired_ratios(res, fitted)
                 _write(path, res)
             learned[label] = res
             cpu_hours.setdefault("fignet", {})[label] = run_cpu_hours(out / f"fignet_{label}")

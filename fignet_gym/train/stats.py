@@ -51,13 +51,13 @@ def median_ratio_interval(model: np.ndarray, ref: np.ndarray, draws: int = BOOTS
     return [float(lo), float(hi)]
 
 
-def paired_ratios(res: dict[str, Any], ref: dict[str, Any],
-                  groups: Sequence[Hashable | None] | None = None) -> dict[str, Any]:
+def paired_ratios(res: dict[str, Any], ref: dict[str, Any]) -> dict[str, Any]:
     """Ratios of two models' median errors on the same trajectories (of the ``*_final`` and
     ``*_last`` medians that :func:`score_rollouts` reports), with bootstrap 95% intervals
-    (trajectories resampled in pairs; whole ``groups`` if given, see
-    :func:`median_ratio_interval`): ``{"translation_rmse": [ratio, lo, hi], "rotation_deg":
-    [...], "translation_rmse_last": [...], "rotation_deg_last": [...]}``.
+    (trajectories resampled in pairs; whole recordings where ``res`` carries their
+    ``groups_final`` / ``groups_last``, see :func:`median_ratio_interval`):
+    ``{"translation_rmse": [ratio, lo, hi], "rotation_deg": [...], "translation_rmse_last":
+    [...], "rotation_deg_last": [...]}``.
     """
     out: dict[str, Any] = {}
     for q in ("translation_rmse", "rotation_deg"):
@@ -68,6 +68,9 @@ def paired_ratios(res: dict[str, Any], ref: dict[str, Any],
             a, b = (np.asarray(r[key]) for r in (res, ref))
             if a.shape != b.shape:
                 raise ValueError(f"paired ratios need the same trajectories ({a.shape} vs {b.shape})")
+            groups = res.get(f"groups_{at}")
+            if ref.get(f"groups_{at}", groups) != groups:
+                raise ValueError("paired ratios need the same trajectories (recordings differ)")
             den = ref[f"{q}_{at}"]
             out[f"{q}{suffix}"] = [res[f"{q}_{at}"] / den if den > 0 else math.nan,
                                    *median_ratio_interval(a, b, groups=groups)]
