@@ -111,11 +111,11 @@ def _make_env(env_id: str, kwargs: dict[str, Any]) -> Any:
     """``gym.make(env_id, dynamics="mujoco", **kwargs)``; :class:`CollectError` for an argument
     the env's constructor does not take or a value it refuses."""
     import gymnasium as gym
+    from gymnasium.envs.registration import load_env_creator
 
     cls = gym.spec(env_id).entry_point
     if isinstance(cls, str):
-        module, name = cls.split(":")
-        cls = getattr(__import__(module, fromlist=[name]), name)
+        cls = load_env_creator(cls)
     params = inspect.signature(cls).parameters
     if not any(p.kind is p.VAR_KEYWORD for p in params.values()):
         unknown = sorted(set(kwargs) - set(params))
@@ -192,19 +192,17 @@ def record_episode(env: Any, planner: Any, seed: int, rng: np.random.Generator,
 
 def collect(args: argparse.Namespace) -> dict[str, Any]:
     """Record ``args.episodes`` episodes into ``args.out`` (atomic); returns the run's summary."""
-    import gymnasium as gym
     import torch
     from tqdm import tqdm
 
     import fignet_gym.envs  # noqa: F401  (registers the environments)
     from fignet_gym.simulator.scene import Scene
-    from fignet_gym.tools.plan import planning_agent
+    from fignet_gym.tools.plan import planning_agent, unknown_env
 
     check_arguments(args)
     torch.set_num_threads(1)
-    if args.env not in gym.registry:
-        ids = sorted(k for k in gym.registry if k.startswith("fignet_gym/"))
-        raise CollectError(f"--env: unknown environment {args.env!r}; use one of {ids}")
+    if unknown := unknown_env(args.env):
+        raise CollectError(unknown)
     extra = env_kwargs(args.env_kwargs)
     env = _make_env(args.env, extra)
     xml = _recordable(env, args.env)

@@ -271,6 +271,24 @@ def _label(frame: np.ndarray, text: str) -> np.ndarray:
     return np.asarray(img)
 
 
+def fignet_env_ids() -> list[str]:
+    """The registered ``fignet_gym/`` environment ids, sorted."""
+    import gymnasium as gym
+
+    import fignet_gym.envs  # noqa: F401  (registers the environments)
+
+    return sorted(k for k in gym.registry if k.startswith(ENV_NAMESPACE))
+
+
+def unknown_env(env_id: str) -> str | None:
+    """The ``--env`` error line if ``env_id`` is not a registered Gymnasium id, else ``None``."""
+    import gymnasium as gym
+
+    ids = fignet_env_ids()
+    return None if env_id in gym.registry else (
+        f"--env: unknown environment {env_id!r}; use one of {ids}")
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Run the episodes, print the table, write ``OUT/summary.json``; returns the summary."""
     import gymnasium as gym
@@ -282,17 +300,17 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
     check_arguments(args)
     torch.set_num_threads(args.threads)
-    ids = sorted(k for k in gym.registry if k.startswith(ENV_NAMESPACE))
-    if args.env not in gym.registry:
-        raise PlanError(f"--env: unknown environment {args.env!r}; use one of {ids}")
+    if unknown := unknown_env(args.env):
+        raise PlanError(unknown)
     out = Path(args.out)
     env_kwargs = {"dynamics": args.act_dynamics}
     render = {"render_mode": "rgb_array", "width": 320, "height": 320} if args.videos else {}
     try:
         env = gym.make(args.env, **render, **env_kwargs)
     except TypeError as err:  # another package's env (CartPole) takes none of these arguments
-        raise PlanError(f"--env: {args.env} takes no dynamics= argument (plannable envs: {ids} or "
-                        f"a user's env with dynamics= and a task): {err}") from None
+        raise PlanError(f"--env: {args.env} takes no dynamics= argument (plannable envs: "
+                        f"{fignet_env_ids()} or a user's env with dynamics= and a task): {err}"
+                        ) from None
     if not isinstance(getattr(env.unwrapped, "task", None), Task):
         raise PlanError(f"--env: {args.env} exposes no task to plan (env.task: a "
                         f"fignet_gym.envs.tasks.Task); {type(env.unwrapped).__name__} has none")
