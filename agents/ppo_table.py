@@ -70,27 +70,71 @@ def read_final_eval(path: Path) -> dict[str, Any]:
     return res
 
 
+def _recipe(config: dict[str, Any]) -> str:
+    """A run's settings without its seed, as a key: runs that differ only in seed are one recipe."""
+    ppo = {k: v for k, v in config.get("ppo", {}).items() if k not in ("seed", "total_timesteps")}
+    return json.dumps({**{k: v for k, v in config.items() if k != "ppo"}, "ppo": ppo}, sort_keys=True)
+
+
+def _spread(values: Sequence[float], points: bool = False) -> str:
+    """``mean [min, max]`` of rates as percentages, or of rate differences as signed percentage
+    points (``points``)."""
+    def fmt(x: float) -> str:
+        return f"{100 * x:+.0f} pts" if points else f"{x:.0%}"
+    mean = sum(values) / len(values)
+    return f"{fmt(mean)} [{fmt(min(values))}, {fmt(max(values))}]"
+
+
 def transfer_table(runs: Sequence[str | os.PathLike]) -> str:
-    """Markdown table: each run (its training dynamics) x evaluated on MuJoCo / on FIGNet.
+    """Markdown tables: each run (its training dynamics) x evaluated on MuJoCo / on FIGNet, then,
+    when several runs share a recipe (the same settings but the seed), one row per recipe.
 
     Reads every run's ``final_eval.json`` (same seeds ``EVAL_SEED + k`` for all runs and both
-    dynamics). Cells: success rate and mean return (the env's reward) over the episodes.
+    dynamics). Cells: success rate and mean return (the env's reward) over the episodes. The
+    exploitation gap is the success on the training dynamics minus the success on MuJoCo (what a
+    policy gains from the learned model's errors; 0 for a run trained on MuJoCo). Recipe rows:
+    mean and [min, max] over the seeds.
     """
     lines = [
-        "| trained on | steps | CPU h | eval on MuJoCo: success | return "
-        "| eval on FIGNet: success | return | episodes |",
-        "|---|---|---|---|---|---|---|---|",
+        "| trained on | seed | steps | CPU h | eval on MuJoCo: success | return "
+        "| eval on FIGNet: success | return | gap | episodes |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
+    recipes: dict[str, list[dict[str, Any]]] = {}
     for run in runs:
         path = Path(run) / FINAL_EVAL
         if not path.exists():
             raise RunError(f"{path}: missing (the run has not finished)")
         res = read_final_eval(path)
         m, f = res["eval"]["mujoco"], res["eval"]["fignet"]
+        trained = res["config"]["dynamics"]
+        gap = res["eval"][trained]["success_rate"] - m["success_rate"]
+        seed = res["config"].get("ppo", {}).get("seed", "-")
         lines.append(
-            f"| {res['config']['dynamics']} ({Path(run).name}) | {res['timesteps']:,} | "
+            f"| {trained} ({Path(run).name}) | {seed} | {res['timesteps']:,} | "
             f"{res['cpu_seconds'] / 3600:.2f} | {m['success_rate']:.0%} | {m['mean_return']:.1f} | "
-            f"{f['success_rate']:.0%} | {f['mean_return']:.1f} | {m['n_episodes']} / {f['n_episodes']} |"
+            f"{f['success_rate']:.0%} | {f['mean_return']:.1f} | {100 * gap:+.0f} pts | "
+            f"{m['n_episodes']} / {f['n_episodes']} |"
+        )
+        recipes.setdefault(_recipe(res["config"]), []).append({**res, "gap": gap})
+    if all(len(group) == 1 for group in recipes.values()):
+        return "\n".join(lines)
+    lines += [
+        "",
+        "| trained on | runs (seeds) | steps | CPU h per run | eval on MuJoCo: success "
+        "| eval on FIGNet: success | gap |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for group in recipes.values():
+        rate = {d: [r["eval"][d]["success_rate"] for r in group] for d in DYNAMICS}
+        steps = sorted({r["timesteps"] for r in group})
+        seeds = ", ".join(str(r["config"].get("ppo", {}).get("seed", "-")) for r in group)
+        lines.append(
+            f"| {group[0]['config']['dynamics']} | {len(group)} ({seeds}) | "
+            f"{' / '.join(f'{s:,}' for s in steps)} | "
+            f"{sum(r['cpu_seconds'] for r in group) / len(group) / 3600:.2f} | "
+            f"{_spread(rate['mujoco'])} | {_spread(rate['fignet'])} | "
+            f"{_spread([r['gap'] for r in group], points=True)} |"
         )
     return "\n".join(lines)
 
@@ -133,8 +177,19 @@ def read_curves(run: str | os.PathLike) -> tuple[str, list[int], dict[str, list[
     return trained, steps, values
 
 
+def exploitation_gap(run: str | os.PathLike) -> tuple[list[int], list[float]]:
+    """Steps ``int[R]`` and the exploitation gap ``float[R]`` at each periodic evaluation of a run:
+    success on its training dynamics minus success on MuJoCo (all zeros when it trained on MuJoCo)."""
+    trained, steps, values = read_curves(run)
+    gap = [a - b for a, b in zip(values[f"{trained}/success_rate"], values["mujoco/success_rate"],
+                                 strict=True)]
+    return steps, gap
+
+
 def plot_curves(runs: Sequence[str | os.PathLike], path: str | os.PathLike) -> Path:
-    """Periodic evaluation of each run (``eval.csv``): success rate and return vs training steps.
+    """Periodic evaluation of each run (``eval.csv``): success rate and return vs training steps,
+    and the exploitation gap (success on the training dynamics minus on MuJoCo) of runs trained
+    on a learned model.
 
     One line per run and evaluation dynamics (solid: MuJoCo, dashed: FIGNet); saved as an image.
     Every run is read (and checked, :func:`read_curves`) before anything is drawn.
@@ -147,19 +202,26 @@ def plot_curves(runs: Sequence[str | os.PathLike], path: str | os.PathLike) -> P
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig, axes = plt.subplots(1, 3, figsize=(15, 3.8))
     for i, (trained, x, values) in enumerate(curves):
         for dyn, style in (("mujoco", "-"), ("fignet", "--")):
-            for ax, key in zip(axes, CURVE_KEYS, strict=True):
+            for ax, key in zip(axes[:2], CURVE_KEYS, strict=True):
                 ax.plot(x, values[f"{dyn}/{key}"], style, color=f"C{i}",
                         label=f"trained on {trained}, eval on {dyn}")
+        if trained != "mujoco":
+            axes[2].plot(*exploitation_gap(runs[i]), color=f"C{i}",
+                         label=f"{Path(runs[i]).name} (trained on {trained})")
     axes[0].set_ylabel("success rate")
     axes[1].set_ylabel("mean episode return (env reward)")
+    axes[2].set_ylabel("exploitation gap: success on training model - on MuJoCo")
+    axes[2].axhline(0.0, color="k", lw=0.8)
     for ax in axes:
         ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v / 1000:g}k"))
         ax.set_xlabel("training environment steps")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
+    if any(trained != "mujoco" for trained, _, _ in curves):
+        axes[2].legend(fontsize=8)
     fig.tight_layout()
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)

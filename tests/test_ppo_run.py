@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import pickle
 import shutil
@@ -19,7 +20,7 @@ from fignet_gym.agents.ppo_logging import read_csv
 from fignet_gym.agents.ppo_policy import NormalizedPolicy, load_run_policy
 from fignet_gym.agents.ppo_run import run_ppo
 from fignet_gym.agents.ppo_rundir import RunError
-from fignet_gym.agents.ppo_table import transfer_table
+from fignet_gym.agents.ppo_table import exploitation_gap, plot_curves, transfer_table
 from fignet_gym.cli import main
 
 PUSH = "fignet_gym/Push-v0"
@@ -128,13 +129,63 @@ def test_final_eval_covers_both_dynamics_on_the_same_seeds(stopped_and_resumed: 
     assert EVAL_SEED > TINY.ppo.seed + TINY.ppo.num_envs
 
 
+def test_transfer_table_aggregates_seeds_of_one_recipe(stopped_and_resumed: dict, tmp_path: Path) -> None:
+    """Runs that differ only in seed become one recipe row: mean and [min, max] of each cell, and
+    the exploitation gap (success on the training dynamics minus on MuJoCo), hand-computed."""
+    src: Path = stopped_and_resumed["root"]
+    runs = []
+    for seed, (on_mujoco, on_fignet) in enumerate([(0.40, 0.55), (0.30, 0.50), (0.50, 0.50)]):
+        run = tmp_path / f"s{seed}"
+        run.mkdir()
+        res = json.loads((src / "final_eval.json").read_text())
+        res["config"]["dynamics"] = "fignet"
+        res["config"]["ppo"]["seed"] = seed
+        res["eval"]["mujoco"]["success_rate"] = on_mujoco
+        res["eval"]["fignet"]["success_rate"] = on_fignet
+        (run / "final_eval.json").write_text(json.dumps(res))
+        runs.append(run)
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "final_eval.json").write_text((src / "final_eval.json").read_text())
+    lines = transfer_table([*runs, other]).splitlines()
+    assert "| +15 pts |" in lines[2] and "| +20 pts |" in lines[3] and "| +0 pts |" in lines[4]
+    recipe = [line for line in lines if line.startswith("| fignet | 3 (0, 1, 2) |")]
+    assert len(recipe) == 1
+    assert "| 40% [30%, 50%] | 52% [50%, 55%] | +12 pts [+0 pts, +20 pts] |" in recipe[0]
+    assert any(line.startswith("| mujoco | 1 (") for line in lines)
+    assert "[" not in transfer_table(runs[:1])  # one run: no recipe table
+
+
+def test_exploitation_gap_is_training_model_minus_mujoco(stopped_and_resumed: dict, tmp_path: Path) -> None:
+    """The gap curve of a run trained on FIGNet, against eval.csv's own columns; plotted too."""
+    src: Path = stopped_and_resumed["root"]
+    run = tmp_path / "fig"
+    run.mkdir()
+    rows = list(csv.DictReader((src / "eval.csv").open()))
+    rows[0]["fignet/success_rate"], rows[0]["mujoco/success_rate"] = "0.75", "0.5"
+    with (run / "eval.csv").open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    cfg = json.loads((src / "config.json").read_text())
+    (run / "config.json").write_text(json.dumps({**cfg, "dynamics": "fignet"}))
+    steps, gap = exploitation_gap(run)
+    assert steps == [int(r["step"]) for r in rows]
+    assert gap[0] == pytest.approx(0.25)
+    assert gap == pytest.approx([float(r["fignet/success_rate"]) - float(r["mujoco/success_rate"])
+                                 for r in rows])
+    assert exploitation_gap(src)[1] == [0.0] * len(rows)  # trained on MuJoCo
+    assert plot_curves([run, src], tmp_path / "c.png").stat().st_size > 10_000
+
+
 def test_transfer_table_rows_and_cli(stopped_and_resumed: dict, capsys: pytest.CaptureFixture) -> None:
     root: Path = stopped_and_resumed["root"]
     res = stopped_and_resumed["result"]
     table = transfer_table([root])
     row = table.splitlines()[2]
     m, f = res["eval"]["mujoco"], res["eval"]["fignet"]
-    assert row.startswith("| mujoco (run) | 128 |")
+    assert row.startswith(f"| mujoco (run) | {TINY.ppo.seed} | 128 |")
+    assert "| +0 pts |" in row  # trained on MuJoCo: nothing to exploit
     assert f"| {m['mean_return']:.1f} |" in row and f"| {f['mean_return']:.1f} |" in row
     assert main(["ppo-table", str(root), "--out", str(root / "table.md"),
                  "--plot", str(root / "curves.png")]) == 0
