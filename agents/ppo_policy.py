@@ -12,6 +12,7 @@ import numpy as np
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecNormalize
 
+from fignet_gym.agents.ppo_config import RunConfig
 from fignet_gym.agents.ppo_features import ObservationTransform
 from fignet_gym.agents.ppo_rundir import NORMALIZER, POLICY, RunError, saved_config
 
@@ -27,13 +28,28 @@ class NormalizedPolicy:
         model: the trained PPO model.
         normalizer: its ``VecNormalize`` (statistics only; ``None``: observations as they are).
         transform: what the policy sees of the env's observation (``None``: the observation).
+        config: the run that trained it (``None``: unknown); :attr:`env_id` and
+            :attr:`env_kwargs` say which env it acts in.
     """
 
     def __init__(self, model: PPO, normalizer: VecNormalize | None,
-                 transform: ObservationTransform | None = None) -> None:
+                 transform: ObservationTransform | None = None, *,
+                 config: RunConfig | None = None) -> None:
         self.model = model
         self.normalizer = normalizer
         self.transform = transform
+        self.config = config
+
+    @property
+    def env_id(self) -> str | None:
+        """The environment id the policy was trained in (``None``: unknown)."""
+        return None if self.config is None else self.config.env_id
+
+    @property
+    def env_kwargs(self) -> dict[str, Any]:
+        """The task arguments it was trained with, without the dynamics: ``gym.make(policy.env_id,
+        **policy.env_kwargs, dynamics="mujoco")`` is its task on MuJoCo."""
+        return {} if self.config is None else dict(self.config.env_kwargs)
 
     def predict(
         self,
@@ -68,7 +84,7 @@ def load_run_policy(run: str | os.PathLike) -> NormalizedPolicy:
     model = PPO.load(root / POLICY, device="cpu")
     cfg = saved_config(root)
     transform = run_transform(cfg.env_id, cfg.env_kwargs, cfg.observation) if cfg else None
-    return NormalizedPolicy(model, load_normalizer(root / NORMALIZER), transform)
+    return NormalizedPolicy(model, load_normalizer(root / NORMALIZER), transform, config=cfg)
 
 
 def run_transform(env_id: str, env_kwargs: dict[str, Any], kind: str) -> ObservationTransform | None:

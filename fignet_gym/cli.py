@@ -1,5 +1,5 @@
-"""``fignet-gym`` command line: demo, plan, collect, ppo, ppo-table, bench, train, evaluate, floor,
-ship, data."""
+"""``fignet-gym`` command line: demo, plan, collect, ppo, ppo-table, ppo-ship, bench, train,
+evaluate, floor, ship, data."""
 
 from __future__ import annotations
 
@@ -158,6 +158,12 @@ def _ppo_table(args: argparse.Namespace) -> int:
     return ppo_table_command(args)
 
 
+def _ppo_ship(args: argparse.Namespace) -> int:
+    from fignet_gym.tools.ppo_ship import ppo_ship_command
+
+    return ppo_ship_command(args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full ``fignet-gym`` argument parser."""
     from fignet_gym.data.cli import register as register_data
@@ -298,6 +304,14 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--out", help="also write the Markdown table to this file")
     o.add_argument("--plot", help="also plot the runs' periodic evaluations to this image")
     o.set_defaults(func=_ppo_table)
+
+    o = sub.add_parser("ppo-ship", help="ship a finished PPO run as a named policy with a generated card "
+                       "(fignet_gym.agents.load_policy(NAME))")
+    o.add_argument("run", help="finished run folder of `fignet-gym ppo`")
+    o.add_argument("--name", required=True, help="policy name, e.g. push-ppo")
+    o.add_argument("--dest", help="folder (default: the package's shipped policies)")
+    o.add_argument("--force", action="store_true", help="replace a shipped policy of that name")
+    o.set_defaults(func=_ppo_ship)
 
     r = sub.add_parser("sim2real", help="nominal and fitted MuJoCo vs FIGNet at several training-set "
                        "sizes on real trajectories (split, fit, train, table, plot; resumable)")

@@ -30,13 +30,29 @@ def test_defaults_match_the_env() -> None:
     assert args.final_episodes >= 50
 
 
-def test_tiny_run_then_resume(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_defaults_are_the_shipped_policys_recipe() -> None:
+    from dataclasses import replace
+
+    from fignet_gym.agents import load_policy
+
+    ex = load_example()
+    shipped = load_policy(ex.SHIPPED).config
+    assert ex.config(ex.parse(["--full"])) == shipped  # the whole budget: exactly what was shipped
+    small = ex.config(ex.Args())
+    assert small == replace(shipped, ppo=replace(shipped.ppo, total_timesteps=small.ppo.total_timesteps))
+    assert small.ppo.total_timesteps < shipped.ppo.total_timesteps
+
+
+def test_tiny_run_then_resume_then_ship(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     ex = load_example()
     out = tmp_path / "run"
     argv = ["--env", "fignet_gym/Push-v0", "--steps", "32", "--num-envs", "2", "--n-steps", "16",
             "--final-episodes", "1", "--eval-every", "0", "--out", str(out)]
     ex.main(argv)
     assert json.loads((out / "final_eval.json").read_text())["timesteps"] == 32
-    assert "| fignet (run) | 32 |" in capsys.readouterr().out
-    ex.main([*argv[:3], "64", *argv[4:]])  # re-running with a larger budget continues the run
+    assert "| fignet (run) | 0 | 32 |" in capsys.readouterr().out
+    dest = tmp_path / "shipped"
+    ex.main([*argv[:3], "64", *argv[4:], "--ship", "tiny", "--ship-dest", str(dest)])  # continues
     assert json.loads((out / "final_eval.json").read_text())["timesteps"] == 64
+    assert json.loads((dest / "tiny" / "final_eval.json").read_text())["timesteps"] == 64
+    assert "64 environment steps" in (dest / "tiny" / "tiny.md").read_text()

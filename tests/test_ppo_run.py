@@ -223,7 +223,7 @@ def test_existing_folder_needs_resume_or_force(tmp_path: Path, capsys: pytest.Ca
     assert "not registered" in capsys.readouterr().err
     assert main([*args, "--force"]) == 0
     assert not (out / "notes.txt").exists() and (out / "final_eval.json").exists()
-    assert "| mujoco (run) | 32 |" in capsys.readouterr().out
+    assert "| mujoco (run) | 0 | 32 |" in capsys.readouterr().out
     # Resuming with other settings than the saved ones is refused, naming them.
     with pytest.raises(RunError, match="dynamics"):
         run_ppo(out, RunConfig.from_json({**json.loads((out / "config.json").read_text()),

@@ -50,15 +50,29 @@ def test_unknown_pretrained_name_lists_the_available_ones() -> None:
 
 
 def test_demo_quick_run_writes_its_summary(tmp_path) -> None:
-    from fignet_gym.tools.demo import run_demo
+    import gymnasium as gym
+    import numpy as np
+
+    from fignet_gym.agents import load_policy
+    from fignet_gym.tools.demo import DEMO_POLICY, DEMO_SEED, run_demo
 
     summary = run_demo(str(tmp_path), quick=True)
     saved = json.loads((tmp_path / "summary.json").read_text())
     assert set(saved) == {"mpc"}
-    for model in ("fignet", "mujoco"):
+    for model in ("fignet", "mujoco", "ppo"):
         row = summary["mpc"]["episodes"][model][0]
         assert row["length"] == 3 and row["plan_cpu_seconds"] > 0
         assert 0.0 <= saved["mpc"]["summary"][model]["success_rate"] <= 1.0
+    assert summary["mpc"]["labels"]["ppo"] == "PPO (trained on FIGNet)"
+    # The PPO row is the shipped policy acting in MuJoCo: the same three steps, replayed here.
+    policy = load_policy(DEMO_POLICY)
+    env = gym.make("fignet_gym/Push-v1")
+    obs, _ = env.reset(seed=DEMO_SEED)
+    for _ in range(3):
+        obs, *_, info = env.step(policy.predict(obs[None].astype(np.float32), deterministic=True)[0][0])
+    ppo = summary["mpc"]["episodes"]["ppo"][0]
+    assert ppo["position_error"] == pytest.approx(info["position_error"], abs=1e-9)
+    assert ppo["orientation_error"] == pytest.approx(info["orientation_error"], abs=1e-9)
     assert (tmp_path / "push_mpc.png").stat().st_size > 1000
     assert (tmp_path / "push_mpc.mp4").stat().st_size > 1000
 

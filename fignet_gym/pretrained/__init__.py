@@ -14,7 +14,8 @@ from fignet_gym.simulator.model import LearnedSimulator
 
 
 def pretrained_dir() -> Path:
-    """Folder of the shipped checkpoints and their model cards."""
+    """Folder of the shipped checkpoints and their model cards (shipped PPO policies: its
+    ``policies/`` sub-folder, read by ``fignet_gym.agents.load_policy``)."""
     return Path(str(resources.files("fignet_gym.pretrained")))
 
 

@@ -3,10 +3,11 @@
 ``fignet-gym demo`` (or ``bash scripts/demo.sh``):
 
 1. runs a few seeded ``Push-v1`` episodes in MuJoCo with a CEM planner whose model is the shipped
-   FIGNet push simulator, and the same episodes with the same planner whose model is MuJoCo;
+   FIGNet push simulator, the same episodes with the same planner whose model is MuJoCo, and the
+   same episodes with the shipped PPO policy (``load_policy("push-ppo")``, trained only on FIGNet);
 2. prints a table (success, final position and heading errors, CPU and wall seconds per action);
-3. writes ``push_mpc.mp4`` (planning on FIGNet left, planning on MuJoCo right), ``push_mpc.png``
-   (distance to the goal against time) and ``summary.json``;
+3. writes ``push_mpc.mp4`` (planning on FIGNet, planning on MuJoCo, PPO, left to right),
+   ``push_mpc.png`` (distance to the goal against time) and ``summary.json``;
 4. with ``--rollouts``, also compares open-loop rollouts of the shipped simulators with MuJoCo
    on fresh pushes and tosses (errors, videos and plots).
 """
@@ -21,6 +22,12 @@ from typing import Any
 import numpy as np
 
 DEMO_SEED = 987_654  # far from the seeds of the shipped training and validation sets
+#: The task of the demo's episodes.
+DEMO_ENV = "fignet_gym/Push-v1"
+#: The shipped PPO policy the demo shows beside the planners (trained for ``DEMO_ENV``).
+DEMO_POLICY = "push-ppo"
+#: What the demo calls each training dynamics of a policy.
+DYNAMICS_LABELS = {"fignet": "FIGNet", "mujoco": "MuJoCo"}
 
 
 def _task(name: str, kind: str, num: int, out: Path, videos: int, horizon: int) -> dict[str, Any]:
@@ -74,13 +81,14 @@ def _env_comparison(out: Path, steps: int = 40) -> dict[str, Any]:
 
 
 def _mpc(out: Path, episodes: int, quick: bool) -> dict[str, Any]:
-    """CEM on the learned model and on MuJoCo, both acting in MuJoCo, on the same seeds."""
+    """CEM on the learned model, CEM on MuJoCo and the shipped PPO policy, all acting in MuJoCo,
+    on the same seeds."""
     import gymnasium as gym
     import imageio
     import torch
 
     import fignet_gym.envs  # noqa: F401  (registers the environments)
-    from fignet_gym.agents import make_planner, run_episode
+    from fignet_gym.agents import PolicyAgent, load_policy, make_planner, run_episode
     from fignet_gym.dynamics import MujocoDynamics, make_dynamics
     from fignet_gym.tools.plan import _label, summarize
 
@@ -88,18 +96,28 @@ def _mpc(out: Path, episodes: int, quick: bool) -> dict[str, Any]:
     budget = {"horizon": 3, "population": 6, "iterations": 1, "replan_every": 1} if quick else {}
     max_steps = 3 if quick else None
     models = {"fignet": make_dynamics("fignet", None, "push"), "mujoco": MujocoDynamics(nthread=1)}
+    policy = load_policy(DEMO_POLICY)
+    if (policy.env_id, policy.env_kwargs) != (DEMO_ENV, {}):
+        raise ValueError(f"{DEMO_POLICY}: trained for {policy.env_id} {policy.env_kwargs}, "
+                         f"the demo runs {DEMO_ENV}")
+    trained = DYNAMICS_LABELS.get(policy.config.dynamics, policy.config.dynamics)
+    labels = {"fignet": "plans on FIGNet", "mujoco": "plans on MuJoCo", "ppo": f"PPO (trained on {trained})"}
+    agents = {name: (lambda env, dyn=dyn: make_planner("cem", dyn, "push", env=env, **budget))
+              for name, dyn in models.items()}
+    agents["ppo"] = lambda env: PolicyAgent(policy)
     size = 96 if quick else 320
-    print(f"\n=== MPC on Push-v1: CEM planning on the shipped FIGNet push model vs on MuJoCo, "
-          f"both acting in MuJoCo ({episodes} seeded episodes) ===")
-    rows: dict[str, list[dict[str, Any]]] = {k: [] for k in models}
-    curves: dict[str, list[list[float]]] = {k: [] for k in models}
-    frames: dict[str, list[np.ndarray]] = {k: [] for k in models}
+    print(f"\n=== Push-v1: CEM planning on the shipped FIGNet push model vs on MuJoCo, and the shipped "
+          f"PPO policy {DEMO_POLICY!r} (trained on {trained}), all acting in MuJoCo "
+          f"({episodes} seeded episodes) ===")
+    rows: dict[str, list[dict[str, Any]]] = {k: [] for k in agents}
+    curves: dict[str, list[list[float]]] = {k: [] for k in agents}
+    frames: dict[str, list[np.ndarray]] = {k: [] for k in agents}
     for k in range(episodes):
         seed = DEMO_SEED + k
         ends = {}
-        for name, dyn in models.items():
-            env = gym.make("fignet_gym/Push-v1", render_mode="rgb_array", width=size, height=size)
-            planner = make_planner("cem", dyn, "push", env=env, **budget)
+        for name, make_agent in agents.items():
+            env = gym.make(DEMO_ENV, render_mode="rgb_array", width=size, height=size)
+            agent = make_agent(env)
             curve: list[float] = []
             shots: list[np.ndarray] = []
 
@@ -113,49 +131,51 @@ def _mpc(out: Path, episodes: int, quick: bool) -> dict[str, Any]:
             curve.append(float(start.task.errors(start.get_state(), start.goal)[0]))
             shots.append(start.render())
             t0 = time.perf_counter()
-            row = {"seed": seed, **run_episode(env, planner, seed=seed, max_steps=max_steps,
+            row = {"seed": seed, **run_episode(env, agent, seed=seed, max_steps=max_steps,
                                                on_step=grab)}
             row["seconds"] = time.perf_counter() - t0
             rows[name].append(row)
             curves[name].append(curve)
             ends[name] = shots
             env.close()
-            print(f"  seed {seed} planning on {name:6s}: success {row['is_success']!s:5s} "
+            print(f"  seed {seed} {labels[name]:24s}: success {row['is_success']!s:5s} "
                   f"in {row['length']:2d} steps, {row['position_error'] * 1000:5.1f} mm, "
                   f"{row['orientation_error']:.3f} rad, "
-                  f"{row['plan_cpu_seconds']:.2f} CPU-s per action", flush=True)
+                  f"{row['plan_cpu_seconds']:.4f} CPU-s per action", flush=True)
         n = max(len(v) for v in ends.values())
-        for name, shots in ends.items():  # hold the last frame of the shorter episode
+        for name, shots in ends.items():  # hold the last frame of the shorter episodes
             frames[name] += shots + [shots[-1]] * (n - len(shots))
     summary = {name: summarize(r) for name, r in rows.items()}
-    print(f"\n{'planning model':16s} {'success':>8s} {'pos. err (mm)':>14s} "
+    print(f"\n{'agent':24s} {'success':>8s} {'pos. err (mm)':>14s} "
           f"{'heading (rad)':>14s} {'CPU-s/action':>13s} {'wall s/action':>14s}")
     for name, sm in summary.items():
         spa = sm["seconds_per_action"]
         ok = sum(r["is_success"] for r in rows[name])
-        print(f"{name:16s} {ok:>4d}/{len(rows[name]):<3d} {sm['median_position_error'] * 1000:14.1f} "
-              f"{sm['median_orientation_error']:14.3f} {spa['cpu']:13.3f} {spa['wall']:14.3f}")
+        print(f"{labels[name]:24s} {ok:>4d}/{len(rows[name]):<3d} "
+              f"{sm['median_position_error'] * 1000:14.1f} {sm['median_orientation_error']:14.3f} "
+              f"{spa['cpu']:13.4f} {spa['wall']:14.4f}")
     print("(errors: medians of the final errors; success: within 1 cm and 0.2 rad)")
-    video = [np.concatenate([_label(a, "plans on FIGNet"), _label(b, "plans on MuJoCo")], axis=1)
-             for a, b in zip(frames["fignet"], frames["mujoco"], strict=True)]
+    video = [np.concatenate([_label(f, labels[name]) for name, f in zip(frames, step, strict=True)],
+                            axis=1)
+             for step in zip(*frames.values(), strict=True)]
     imageio.mimsave(out / "push_mpc.mp4", video, fps=50)
-    _plot_mpc(curves, out / "push_mpc.png")
-    return {"summary": summary, "episodes": rows}
+    _plot_mpc(curves, labels, out / "push_mpc.png")
+    return {"summary": summary, "episodes": rows, "labels": labels}
 
 
-def _plot_mpc(curves: dict[str, list[list[float]]], path: Path) -> None:
-    """Distance from the goal against time, every episode, one colour per planning model."""
+def _plot_mpc(curves: dict[str, list[list[float]]], labels: dict[str, str], path: Path) -> None:
+    """Distance from the goal against time, every episode, one colour per agent."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 3.5))
-    for (name, eps), colour in zip(curves.items(), ("tab:blue", "tab:orange"), strict=False):
+    for (name, eps), colour in zip(curves.items(), ("tab:blue", "tab:orange", "tab:green"), strict=False):
         for i, c in enumerate(eps):
             t = np.arange(len(c)) * 0.02
             ax.plot(t, np.array(c) * 1000, color=colour, alpha=0.8,
-                    label=f"plans on {name}" if i == 0 else None)
+                    label=labels[name] if i == 0 else None)
     ax.axhline(10.0, color="grey", ls="--", lw=1, label="success (1 cm)")
     ax.set(xlabel="time (s)", ylabel="object to goal (mm)", title="Push-v1, acting in MuJoCo")
     ax.legend()
@@ -171,7 +191,7 @@ def run_demo(
 
     Args:
         out: output folder. quick: a tiny budget (tests). episodes: seeded Push-v1 episodes per
-            planning model. rollouts: also compare open-loop rollouts with MuJoCo.
+            agent (two planners, one PPO policy). rollouts: also compare open-loop rollouts with MuJoCo.
     """
     outdir = Path(out)
     outdir.mkdir(parents=True, exist_ok=True)
