@@ -1,6 +1,5 @@
 """Training through rollouts: the differentiable shape match, the differentiable step, the
 rollout loss's weighting and the windows it is given."""
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -8,15 +7,7 @@ import pytest
 import torch
 
 from fignet_gym.data.format import build_scene, load_trajectories
-from fignet_gym.simulator.geometry import (
-    axis_angle_to_quat,
-    kabsch,
-    polar_fit,
-    quat_angle,
-    quat_mul,
-    quat_rotate,
-    transform_points,
-)
+from fignet_gym.simulator.geometry import axis_angle_to_quat, kabsch, polar_fit, quat_angle, transform_points
 from fignet_gym.train.config import load_run_config
 from fignet_gym.train.sampling import WindowSampler
 from fignet_gym.train.trainer import Trainer
@@ -153,71 +144,3 @@ def test_rollout_windows_are_weighted_by_their_largest_target_acceleration(push_
     assert np.allclose(got, w[moving] / w[moving].sum(), rtol=1e-4)
     with pytest.raises(ValueError, match="targets must be in 1..5"):
         WindowSampler([traj], [scene], history=history, still_weight=0.1, seed=0, unroll=4, targets=6)
-
-
-
-def _rotation_oracle(nodes: np.ndarray, moved: np.ndarray, node_object: np.ndarray,
-                     objects: list[int]) -> float:
-    """Mean over ``objects`` and axes of the squared rotational error, by explicit loops:
-    ``r_rms * sum_i r_i x e_i / sum_i |r_i|^2`` with ``r`` from each object's node centroid."""
-    total = []
-    for o in objects:
-        x, e = nodes[node_object == o], moved[node_object == o] - nodes[node_object == o]
-        r = x - x.mean(axis=0)
-        r2 = float((r * r).sum())
-        ang = np.sqrt(r2 / len(r)) * sum(np.cross(ri, ei) for ri, ei in zip(r, e, strict=True)) / r2
-        total.extend(ang**2)
-    return float(np.mean(total))
-
-
-def test_rollout_rotation_weight_adds_the_rotational_error_only(
-        push_file: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    R, w, yaw = 3, 5.0, 0.02
-    trainer = _rollout_trainer(push_file, tmp_path / "rot", R)
-    H = trainer.sim.config.history + 1
-    scene, window = trainer.batch()
-    rest = window[:1].expand(H + R, -1, -1)  # the truth: everything at rest
-    dyn = scene.dynamic_mask
-    nodes0 = scene.node_positions(rest[0])
-    centroid = torch.stack([nodes0[scene.node_object == o].mean(0) for o in range(scene.num_objects)])
-    steps = {"j": 0}
-
-    def turned(j: int) -> torch.Tensor:
-        """Every object turned about its node centroid by ``j`` yaw (an error carried on)."""
-        dq = axis_angle_to_quat(torch.tensor([0.0, 0.0, yaw * j])).expand(len(centroid), 4)
-        p = centroid + quat_rotate(dq, rest[0, :, :3] - centroid)
-        return torch.where(dyn[:, None], torch.cat((p, quat_mul(dq, rest[0, :, 3:])), -1), rest[0])
-
-    def turn(_scene: object, _hist: torch.Tensor, kin: torch.Tensor) -> torch.Tensor:
-        steps["j"] += 1
-        return torch.where(dyn[:, None], turned(steps["j"]), kin)
-
-    def shift(_scene: object, _hist: torch.Tensor, kin: torch.Tensor) -> torch.Tensor:
-        steps["j"] += 1
-        moved = rest[0].clone()
-        moved[:, :3] += torch.tensor([3e-3, -4e-3, 0.0]) * steps["j"]
-        return torch.where(dyn[:, None], moved, kin)
-
-    def loss(step: object, weight: float) -> float:
-        steps["j"] = 0
-        monkeypatch.setattr(trainer.sim, "differentiable_step", step)
-        monkeypatch.setattr(trainer, "cfg", replace(trainer.cfg, rollout_rotation_weight=weight))
-        return float(trainer.rollout_loss(scene, rest, None))
-
-    # A translation has no rotational part: the weight changes nothing.
-    assert loss(shift, w) == pytest.approx(loss(shift, 0.0), rel=1e-9)
-    # A turn: the weight adds w times the rotational error of step j over j^2, as the loops say.
-    seg = scene.node_object.numpy()
-    objects = [o for o in range(scene.num_objects) if bool(dyn[o])]
-    sigma = float(trainer.sim.target_norm.std.mean())
-    expect = w / R / sigma**2 * sum(
-        _rotation_oracle(nodes0.double().numpy(), scene.node_positions(turned(j)).double().numpy(),
-                         seg, objects) / j**2 for j in range(1, R + 1))
-    base = loss(turn, 0.0)
-    assert base > 0
-    assert loss(turn, w) - base == pytest.approx(expect, rel=1e-3)
-
-
-def test_rollout_rotation_weight_needs_rollout_steps() -> None:
-    with pytest.raises(ValueError, match="rollout_rotation_weight needs training.rollout_steps"):
-        load_run_config("push-cpu", {"training.rollout_rotation_weight": 1.0})

@@ -52,12 +52,6 @@ class TrainConfig:
             Errors that are small per step but add up, such as a few percent of excess impulse at
             an impact, are what it supervises. 0: off. Windows are then weighted by the largest
             acceleration among the rollout's targets.
-        rollout_rotation_weight: weight of a second rollout term on the rotational part of each
-            dynamic object's node position error (:func:`rigid_terms`: its angle times the
-            object's RMS radius, so in metres like the node term), with the node term's ``1 / j``
-            and normalisation. A pushed object turned wrongly by a few degrees moves its nodes
-            less than its translation error does, so the node term alone hardly sees the yaw a
-            planner steers by. 0: off; needs ``rollout_steps``.
         rotate_z: random rotation of each window about the vertical axis.
         mirror: reflect half of the windows in the vertical plane y = 0 (:func:`mirror_y`), which
             is physical only when every object's mesh and centre of mass are symmetric under its
@@ -94,7 +88,6 @@ class TrainConfig:
     unroll_after: int = 0
     rollout_steps: int = 0
     rollout_weight: float = 1.0
-    rollout_rotation_weight: float = 0.0
     rotate_z: bool = True
     mirror: bool = False
     valid_every: int = 1000
@@ -123,9 +116,6 @@ class TrainConfig:
                 raise ValueError(f"training.{f.name} must be a finite number {rule}, got {value!r}")
         if self.ema_decay >= 1:
             raise ValueError(f"training.ema_decay must be below 1, got {self.ema_decay!r}")
-        if self.rollout_rotation_weight > 0 and self.rollout_steps == 0:
-            raise ValueError("training.rollout_rotation_weight needs training.rollout_steps >= 1 "
-                             "(it weighs the rotational part of the rollout loss)")
 
     def noise(self, std: float | None = None) -> TrainingNoise:
         """The input noise of this config, with ``std`` (m) in place of ``noise_std`` if given

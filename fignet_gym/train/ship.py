@@ -135,11 +135,9 @@ teacher-forced one-step spin gain (slope of predicted on true change of angular 
 
 def _rollout(tr: dict[str, Any]) -> str:
     steps = tr.get("rollout_steps", 0)
-    rot = tr.get("rollout_rotation_weight", 0)
     return "" if not steps else (
         f"\n  training through rollouts of {steps} steps (`rollout_steps`, weight "
-        f"{tr.get('rollout_weight')}"
-        + (f", plus {rot} x its rotational part (`rollout_rotation_weight`)" if rot else "") + ");")
+        f"{tr.get('rollout_weight')});")
 
 
 def _extras(c: SimulatorConfig) -> str:

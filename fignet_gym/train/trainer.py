@@ -46,7 +46,7 @@ from fignet_gym.data.format import Trajectory, build_scene, load_trajectories
 from fignet_gym.pretrained import load_pretrained
 from fignet_gym.simulator.checkpoint import CheckpointError, load, save
 from fignet_gym.simulator.config import SimulatorConfig
-from fignet_gym.simulator.model import LearnedSimulator, rigid_terms
+from fignet_gym.simulator.model import LearnedSimulator
 from fignet_gym.simulator.scene import Scene
 from fignet_gym.train.config import TrainConfig, load_run_config
 from fignet_gym.train.evaluation import rollout_metrics
@@ -309,23 +309,16 @@ class Trainer:
     def rollout_loss(self, scene: Scene, poses: Tensor, inputs: Tensor | None) -> Tensor:
         """Node position errors of a rollout with gradients (``TrainConfig.rollout_steps``):
         from ``inputs float[H, O, 7]`` (pushforward's history) or the noisy first ``H`` rows of
-        ``poses float[H + R, O, 7]`` (true poses), against their last ``R`` rows, plus
-        ``rollout_rotation_weight`` times the rotational part of those errors. Scalar."""
+        ``poses float[H + R, O, 7]`` (true poses), against their last ``R`` rows. Scalar."""
         H, R = self.sim.config.history + 1, self.cfg.rollout_steps
         hist = inputs if inputs is not None else self.sim.pose_noise(scene, poses[:H], self.gen,
                                                                      self.noise)
         dyn = scene.dynamic_mask[scene.node_object]
-        rot_w = self.cfg.rollout_rotation_weight
         terms = []
         for j in range(R):
             nxt = self.sim.differentiable_step(scene, hist, poses[H + j])
-            true = scene.node_positions(poses[H + j])
-            err = scene.node_positions(nxt) - true  # zero on non-dynamic nodes (given poses)
-            term = err[dyn].pow(2).mean()
-            if rot_w > 0:
-                _, ang = rigid_terms(true, err, scene.node_object, scene.num_objects)
-                term = term + rot_w * ang[scene.dynamic_mask].pow(2).mean()
-            terms.append(term / (j + 1) ** 2)
+            err = scene.node_positions(nxt)[dyn] - scene.node_positions(poses[H + j])[dyn]
+            terms.append(err.pow(2).mean() / (j + 1) ** 2)
             hist = torch.cat((hist[1:], nxt[None]), 0)
         scale = self.sim.target_norm.std.mean().to(poses.dtype)
         return torch.stack(terms).mean() / scale**2
