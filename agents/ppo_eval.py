@@ -45,6 +45,12 @@ EVAL_KEYS = (
     "episode_successes",
     "episode_initial_observations",
 )
+#: Info keys of an episode's final position error (m), first found wins: a push's distance to the
+#: goal, a toss's landing distance from the target.
+POSITION_ERROR_KEYS = ("position_error", "distance")
+#: Info keys of an episode's final heading error and the factor to radians: a push's (rad), a
+#: toss's (degrees, signed; reported as its absolute value like a push's).
+ORIENTATION_ERROR_KEYS = (("orientation_error", 1.0), ("yaw_error_deg", math.pi / 180.0))
 #: The scalar keys of a report logged at each periodic evaluation.
 SUMMARY_KEYS = ("success_rate", "mean_return", "final_position_error", "final_orientation_error",
                 "diverged_rate")
@@ -98,11 +104,12 @@ def evaluate_policy_on(
         A dictionary with the keys of :data:`EVAL_KEYS`: ``dynamics`` (its description),
         ``n_episodes``, ``success_rate`` (fraction ending with ``info["is_success"]``),
         ``mean_return``/``std_return``, ``mean_length`` (steps), ``final_position_error`` (m)
-        and ``final_orientation_error`` (rad) averaged over episodes (from the last step's
-        ``info``), ``diverged_rate`` (episodes the dynamics blew up in), and per-episode lists
-        ``episode_returns``, ``episode_position_errors``, ``episode_orientation_errors``,
-        ``episode_successes`` and ``episode_initial_observations`` (each episode's first
-        observation: set by its seed alone, so equal across dynamics for the same seeds).
+        and ``final_orientation_error`` (absolute, rad) averaged over episodes (from the last
+        step's ``info``: a push's goal errors, a toss's landing errors), ``diverged_rate``
+        (episodes the dynamics blew up in), and per-episode lists ``episode_returns``,
+        ``episode_position_errors``, ``episode_orientation_errors``, ``episode_successes`` and
+        ``episode_initial_observations`` (each episode's first observation: set by its seed
+        alone, so equal across dynamics for the same seeds).
     """
     if n_episodes < 1:
         raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
@@ -172,13 +179,26 @@ def _run_batch(
             "return": float(returns[i]),
             "length": int(lengths[i]),
             "is_success": bool(finals[i].get("is_success", False)),
-            "position_error": float(finals[i].get("position_error", math.nan)),
-            "orientation_error": float(finals[i].get("orientation_error", math.nan)),
+            "position_error": _position_error(finals[i]),
+            "orientation_error": _orientation_error(finals[i]),
             "diverged": finals[i].get("diverged") is not None,
             "initial_observation": first_obs[i].tolist(),
         }
         for i in range(n)
     ]
+
+
+def _position_error(info: Mapping[str, Any]) -> float:
+    """An episode's final position error (m) from its last ``info`` (NaN if the env reports none)."""
+    found = [info[k] for k in POSITION_ERROR_KEYS if info.get(k) is not None]
+    return float(found[0]) if found else math.nan
+
+
+def _orientation_error(info: Mapping[str, Any]) -> float:
+    """An episode's final absolute heading error (rad) from its last ``info`` (NaN if none)."""
+    found = [abs(float(info[k])) * to_rad for k, to_rad in ORIENTATION_ERROR_KEYS
+             if info.get(k) is not None]
+    return found[0] if found else math.nan
 
 
 def _item(infos: dict[str, Any], key: str, i: int) -> Any:

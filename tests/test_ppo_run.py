@@ -8,6 +8,7 @@ import pickle
 import shutil
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
@@ -410,3 +411,32 @@ def test_recipe_options_reach_the_saved_config(tmp_path: Path) -> None:
     assert saved.ppo.use_sde and saved.ppo.sde_sample_freq == 4
     assert (saved.observation, saved.shaping, saved.success_bonus) == ("push-features", 0.5, 2.0)
     assert PPO.load(out / "policy.zip", device="cpu").use_sde
+
+
+def test_cube_toss_run_reports_landing_errors_of_the_fit_and_of_cube_real(tmp_path: Path) -> None:
+    """A run on CubeToss-v0 evaluates on the fitted MuJoCo and on ``cube-real``, and its final
+    errors are each toss's landing error: the ``info`` of the same toss played by hand."""
+    cube = "fignet_gym/CubeToss-v0"
+    cfg = RunConfig(env_id=cube, dynamics="mujoco",
+                    ppo=PPOConfig(total_timesteps=16, num_envs=2, n_steps=8, batch_size=8, n_epochs=1),
+                    eval_every=0, final_episodes=2, checkpoint_every=16)
+    res = run_ppo(tmp_path / "run", cfg, progress=False)
+    policy = load_run_policy(tmp_path / "run")
+    backends = {"mujoco": {"mujoco_params": "fitted"}, "fignet": {"checkpoint": "cube-real"}}
+    for dyn, kwargs in backends.items():
+        rep = res["eval"][dyn]
+        env = gym.make(cube, dynamics=dyn, **kwargs)
+        for k in range(cfg.final_episodes):
+            obs, _ = env.reset(seed=EVAL_SEED + k)
+            np.testing.assert_array_equal(obs, np.float32(rep["episode_initial_observations"][k]))
+            _, reward, terminated, _, info = env.step(policy.predict(obs[None], deterministic=True)[0][0])
+            assert terminated and rep["episode_returns"][k] == pytest.approx(reward, rel=1e-5)
+            assert rep["episode_position_errors"][k] == pytest.approx(info["distance"], rel=1e-5)
+            assert rep["episode_orientation_errors"][k] == pytest.approx(
+                abs(np.radians(info["yaw_error_deg"])), rel=1e-5, abs=1e-7)
+        env.close()
+        if dyn == "mujoco":  # the shipped fit, not the nominal parameters
+            assert not info["mujoco_source"].startswith("NOMINAL")
+    # The two backends land the same tosses apart: the fit is not the learned model.
+    errors = {dyn: res["eval"][dyn]["episode_position_errors"] for dyn in backends}
+    assert errors["mujoco"] != errors["fignet"]
