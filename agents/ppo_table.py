@@ -70,6 +70,18 @@ def read_final_eval(path: Path) -> dict[str, Any]:
     return res
 
 
+def _error_mm(report: dict[str, Any]) -> str:
+    """Median final position error of an evaluation report in mm (a push's distance to the goal,
+    a toss's landing distance from the target); ``-`` when the report has none."""
+    errors = [e for e in report.get("episode_position_errors", []) if _number(e)]
+    if not errors:
+        return "-"
+    errors.sort()
+    mid = len(errors) // 2
+    median = errors[mid] if len(errors) % 2 else (errors[mid - 1] + errors[mid]) / 2
+    return f"{1000 * median:.1f}"
+
+
 def _recipe(config: dict[str, Any]) -> str:
     """A run's settings without its seed, as a key: runs that differ only in seed are one recipe."""
     ppo = {k: v for k, v in config.get("ppo", {}).items() if k not in ("seed", "total_timesteps")}
@@ -90,15 +102,16 @@ def transfer_table(runs: Sequence[str | os.PathLike]) -> str:
     when several runs share a recipe (the same settings but the seed), one row per recipe.
 
     Reads every run's ``final_eval.json`` (same seeds ``EVAL_SEED + k`` for all runs and both
-    dynamics). Cells: success rate and mean return (the env's reward) over the episodes. The
+    dynamics). Cells: success rate, median final position error (mm: a push's distance to the
+    goal, a toss's landing distance) and mean return (the env's reward) over the episodes. The
     exploitation gap is the success on the training dynamics minus the success on MuJoCo (what a
     policy gains from the learned model's errors; 0 for a run trained on MuJoCo). Recipe rows:
     mean and [min, max] over the seeds.
     """
     lines = [
-        "| trained on | seed | steps | CPU h | eval on MuJoCo: success | return "
-        "| eval on FIGNet: success | return | gap | episodes |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| trained on | seed | steps | CPU h | eval on MuJoCo: success | error mm | return "
+        "| eval on FIGNet: success | error mm | return | gap | episodes |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     recipes: dict[str, list[dict[str, Any]]] = {}
     for run in runs:
@@ -112,8 +125,9 @@ def transfer_table(runs: Sequence[str | os.PathLike]) -> str:
         seed = res["config"].get("ppo", {}).get("seed", "-")
         lines.append(
             f"| {trained} ({Path(run).name}) | {seed} | {res['timesteps']:,} | "
-            f"{res['cpu_seconds'] / 3600:.2f} | {m['success_rate']:.0%} | {m['mean_return']:.1f} | "
-            f"{f['success_rate']:.0%} | {f['mean_return']:.1f} | {100 * gap:+.0f} pts | "
+            f"{res['cpu_seconds'] / 3600:.2f} | {m['success_rate']:.0%} | {_error_mm(m)} | "
+            f"{m['mean_return']:.1f} | {f['success_rate']:.0%} | {_error_mm(f)} | "
+            f"{f['mean_return']:.1f} | {100 * gap:+.0f} pts | "
             f"{m['n_episodes']} / {f['n_episodes']} |"
         )
         recipes.setdefault(_recipe(res["config"]), []).append({**res, "gap": gap})

@@ -187,6 +187,8 @@ def test_transfer_table_rows_and_cli(stopped_and_resumed: dict, capsys: pytest.C
     m, f = res["eval"]["mujoco"], res["eval"]["fignet"]
     assert row.startswith(f"| mujoco (run) | {TINY.ppo.seed} | 128 |")
     assert "| +0 pts |" in row  # trained on MuJoCo: nothing to exploit
+    median_mm = 1000 * float(np.median(m["episode_position_errors"]))
+    assert f"| {m['success_rate']:.0%} | {median_mm:.1f} |" in row
     assert f"| {m['mean_return']:.1f} |" in row and f"| {f['mean_return']:.1f} |" in row
     assert main(["ppo-table", str(root), "--out", str(root / "table.md"),
                  "--plot", str(root / "curves.png")]) == 0
