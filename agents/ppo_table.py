@@ -221,19 +221,20 @@ def plot_curves(runs: Sequence[str | os.PathLike], path: str | os.PathLike) -> P
         for dyn, style in (("mujoco", "-"), ("fignet", "--")):
             for ax, key in zip(axes[:2], CURVE_KEYS, strict=True):
                 ax.plot(x, values[f"{dyn}/{key}"], style, color=f"C{i}",
-                        label=f"trained on {trained}, eval on {dyn}")
+                        label=f"{Path(runs[i]).name} (trained on {trained}), eval on {dyn}")
         if trained != "mujoco":
             axes[2].plot(*exploitation_gap(runs[i]), color=f"C{i}",
                          label=f"{Path(runs[i]).name} (trained on {trained})")
     axes[0].set_ylabel("success rate")
     axes[1].set_ylabel("mean episode return (env reward)")
-    axes[2].set_ylabel("exploitation gap: success on training model - on MuJoCo")
+    axes[2].set_ylabel("gap: training model - MuJoCo")
+    axes[2].set_title("exploitation gap (success)", fontsize=9)
     axes[2].axhline(0.0, color="k", lw=0.8)
     for ax in axes:
         ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v / 1000:g}k"))
         ax.set_xlabel("training environment steps")
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
+    axes[0].legend(fontsize=7)
     if any(trained != "mujoco" for trained, _, _ in curves):
         axes[2].legend(fontsize=8)
     fig.tight_layout()
