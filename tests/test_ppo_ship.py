@@ -7,6 +7,7 @@ import csv
 import json
 import re
 import shlex
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -14,23 +15,17 @@ import pytest
 
 import fignet_gym.agents.ppo_shipped as shipped
 from fignet_gym.agents import load_policy, load_run_policy
-from fignet_gym.agents.ppo_config import PPOConfig, RunConfig
+from fignet_gym.agents.ppo_config import RunConfig
 from fignet_gym.agents.ppo_run import run_ppo
 from fignet_gym.agents.ppo_rundir import RunError
 from fignet_gym.cli import build_parser, main
 from fignet_gym.tools.ppo import config_from_args
 from fignet_gym.tools.ppo_ship import wilson_interval
+from tests.test_ppo_run import TINY as TINY_RUN
 
-#: 2 envs x 16 steps per PPO iteration, two iterations; evaluated after each and on 3 final episodes.
-TINY = RunConfig(
-    env_id="fignet_gym/Push-v1",
-    dynamics="mujoco",
-    ppo=PPOConfig(total_timesteps=64, num_envs=2, n_steps=16, batch_size=16, n_epochs=1),
-    eval_every=32,
-    eval_episodes=1,
-    final_episodes=3,
-    checkpoint_every=64,
-)
+#: test_ppo_run's tiny run on Push-v1 for two iterations; evaluated after each and on 3 final episodes.
+TINY = replace(TINY_RUN, env_id="fignet_gym/Push-v1", ppo=replace(TINY_RUN.ppo, total_timesteps=64),
+               final_episodes=3)
 
 
 @pytest.fixture(scope="module")
