@@ -82,10 +82,18 @@ def _error_mm(report: dict[str, Any]) -> str:
     return f"{1000 * median:.1f}"
 
 
+#: Settings that do not change what a run trains (bookkeeping and how it is evaluated), left out
+#: of a recipe with the seed and the budget.
+NOT_RECIPE = ("seed", "total_timesteps", "torch_threads", "eval_every", "eval_episodes",
+              "final_episodes", "checkpoint_every")
+
+
 def _recipe(config: dict[str, Any]) -> str:
-    """A run's settings without its seed, as a key: runs that differ only in seed are one recipe."""
-    ppo = {k: v for k, v in config.get("ppo", {}).items() if k not in ("seed", "total_timesteps")}
-    return json.dumps({**{k: v for k, v in config.items() if k != "ppo"}, "ppo": ppo}, sort_keys=True)
+    """A run's training settings as a key: runs that differ only in seed (or in bookkeeping,
+    :data:`NOT_RECIPE`) are one recipe."""
+    ppo = {k: v for k, v in config.get("ppo", {}).items() if k not in NOT_RECIPE}
+    rest = {k: v for k, v in config.items() if k != "ppo" and k not in NOT_RECIPE}
+    return json.dumps({**rest, "ppo": ppo}, sort_keys=True)
 
 
 def _spread(values: Sequence[float], points: bool = False) -> str:

@@ -141,6 +141,7 @@ def test_transfer_table_aggregates_seeds_of_one_recipe(stopped_and_resumed: dict
         res = json.loads((src / "final_eval.json").read_text())
         res["config"]["dynamics"] = "fignet"
         res["config"]["ppo"]["seed"] = seed
+        res["config"]["checkpoint_every"] = 64 * (seed + 1)  # bookkeeping: still one recipe
         res["eval"]["mujoco"]["success_rate"] = on_mujoco
         res["eval"]["fignet"]["success_rate"] = on_fignet
         (run / "final_eval.json").write_text(json.dumps(res))
