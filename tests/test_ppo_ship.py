@@ -171,8 +171,9 @@ def test_shipped_push_ppo_under_sb3_evaluate_policy_scores_as_its_own_evaluation
     # by up to 10 in a 75-step push; the learned step does not depend on MuJoCo's solver.)
     final = json.loads((shipped.policies_dir() / "push-ppo" / "final_eval.json").read_text())
     learned = evaluate_policy_on("fignet", policy, n_episodes=n, seed=EVAL_SEED)
-    assert learned["episode_returns"] == pytest.approx(final["eval"]["fignet"]["episode_returns"][:n], rel=1e-5)
-    assert learned["episode_successes"] == final["eval"]["fignet"]["episode_successes"][:n]
+    shipped_eval = final["eval"]["fignet"]
+    assert learned["episode_returns"] == pytest.approx(shipped_eval["episode_returns"][:n], rel=1e-5)
+    assert learned["episode_successes"] == shipped_eval["episode_successes"][:n]
 
 
 def test_the_shipped_card_is_the_one_its_files_generate(tmp_path: Path) -> None:
