@@ -10,6 +10,7 @@ import csv
 import json
 import math
 import os
+import statistics
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -74,12 +75,7 @@ def _error_mm(report: dict[str, Any]) -> str:
     """Median final position error of an evaluation report in mm (a push's distance to the goal,
     a toss's landing distance from the target); ``-`` when the report has none."""
     errors = [e for e in report.get("episode_position_errors", []) if _number(e)]
-    if not errors:
-        return "-"
-    errors.sort()
-    mid = len(errors) // 2
-    median = errors[mid] if len(errors) % 2 else (errors[mid - 1] + errors[mid]) / 2
-    return f"{1000 * median:.1f}"
+    return f"{1000 * statistics.median(errors):.1f}" if errors else "-"
 
 
 #: Settings that do not change what a run trains (bookkeeping and how it is evaluated), left out

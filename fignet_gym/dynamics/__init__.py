@@ -21,13 +21,13 @@ from fignet_gym.dynamics.base import (
     state_offsets,
     userdata_slice,
 )
-from fignet_gym.dynamics.factory import DYNAMICS_FACTORIES, make_dynamics
+from fignet_gym.dynamics.factory import DYNAMICS_FACTORIES, DYNAMICS_LABELS, make_dynamics
 from fignet_gym.dynamics.history import compile_with_history
 from fignet_gym.dynamics.learned import FIGNetDynamics
 from fignet_gym.dynamics.mujoco import MujocoDynamics
 
 __all__ = [
-    "CONTROL_SPEC", "DYNAMICS_FACTORIES", "PHYSICS_SPEC", "STATE_SPEC", "DivergenceError",
+    "CONTROL_SPEC", "DYNAMICS_FACTORIES", "DYNAMICS_LABELS", "PHYSICS_SPEC", "STATE_SPEC", "DivergenceError",
     "Dynamics", "DynamicsBase",
     "FIGNetDynamics", "MujocoDynamics", "check_rollout_inputs", "make_dynamics", "rollout_loop",
     "join_state", "set_mocap", "split_state", "state_offsets", "compile_with_history",

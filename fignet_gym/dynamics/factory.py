@@ -28,6 +28,8 @@ def _fignet(checkpoint: object, scene_type: str, **kwargs: Any) -> Dynamics:
 #: Names accepted by ``dynamics=``: factories ``(checkpoint, scene_type, **kwargs) -> Dynamics``.
 #: Add an entry to make a backend selectable by name.
 DYNAMICS_FACTORIES: dict[str, Callable[..., Dynamics]] = {"mujoco": _mujoco, "fignet": _fignet}
+#: How tables, cards and videos name each backend of :data:`DYNAMICS_FACTORIES`.
+DYNAMICS_LABELS: dict[str, str] = {"mujoco": "MuJoCo", "fignet": "FIGNet"}
 
 
 def make_dynamics(

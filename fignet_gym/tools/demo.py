@@ -26,8 +26,6 @@ DEMO_SEED = 987_654  # far from the seeds of the shipped training and validation
 DEMO_ENV = "fignet_gym/Push-v1"
 #: The shipped PPO policy the demo shows beside the planners (trained for ``DEMO_ENV``).
 DEMO_POLICY = "push-ppo"
-#: What the demo calls each training dynamics of a policy.
-DYNAMICS_LABELS = {"fignet": "FIGNet", "mujoco": "MuJoCo"}
 
 
 def _task(name: str, kind: str, num: int, out: Path, videos: int, horizon: int) -> dict[str, Any]:
@@ -89,7 +87,7 @@ def _mpc(out: Path, episodes: int, quick: bool) -> dict[str, Any]:
 
     import fignet_gym.envs  # noqa: F401  (registers the environments)
     from fignet_gym.agents import PolicyAgent, load_policy, make_planner, run_episode
-    from fignet_gym.dynamics import MujocoDynamics, make_dynamics
+    from fignet_gym.dynamics import DYNAMICS_LABELS, MujocoDynamics, make_dynamics
     from fignet_gym.tools.plan import _label, summarize
 
     torch.set_num_threads(1)

@@ -232,7 +232,9 @@ class SideBySide:
                  acting: str = "mujoco") -> None:
         import gymnasium as gym
 
-        self.acting = {"mujoco": "MuJoCo", "fignet": "FIGNet"}.get(acting, acting)
+        from fignet_gym.dynamics import DYNAMICS_LABELS
+
+        self.acting = DYNAMICS_LABELS.get(acting, acting)
         self.imagined = gym.make(env_id, render_mode="rgb_array", width=width, height=width,
                                  **env_kwargs).unwrapped
         self.imagined.reset(seed=0)

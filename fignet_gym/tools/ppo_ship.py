@@ -28,6 +28,7 @@ from fignet_gym.agents.ppo_policy import load_run_policy
 from fignet_gym.agents.ppo_rundir import CONFIG, FINAL_EVAL, NORMALIZER, POLICY, RunError
 from fignet_gym.agents.ppo_shipped import policies_dir
 from fignet_gym.agents.ppo_table import read_curves, read_final_eval
+from fignet_gym.dynamics import DYNAMICS_LABELS
 from fignet_gym.tools.ppo import OPTIONS, config_from_args
 
 #: A shipped name: what ``load_policy`` takes and the folder's name.
@@ -36,8 +37,6 @@ NAME = re.compile(r"^[a-z0-9][a-z0-9._-]*$")
 EVAL_CSV = "eval.csv"
 #: Two-sided 95% normal quantile of the Wilson score interval.
 Z95 = 1.959964
-#: What the card calls each evaluation dynamics.
-LABELS = {"mujoco": "MuJoCo", "fignet": "FIGNet"}
 
 
 class ShipError(ValueError):
@@ -144,7 +143,7 @@ def _sha256(path: Path) -> str:
 def policy_card(name: str, run: Path, cfg: RunConfig, final: dict[str, Any],
                 curve: tuple[list[int], dict[str, list[float]]] | None, files: dict[str, Path]) -> str:
     """Markdown card of a shipped policy, every figure read from the run's files."""
-    trained = LABELS[cfg.dynamics]
+    trained = DYNAMICS_LABELS[cfg.dynamics]
     sim = cfg.simulator or "the shipped simulator of the env's scene"
     source = (f"FIGNet (learned dynamics: {sim})" if cfg.dynamics == "fignet" else "MuJoCo")
     cpu_h, wall_h = final["cpu_seconds"] / 3600, final.get("wall_seconds", math.nan) / 3600
@@ -183,11 +182,11 @@ def policy_card(name: str, run: Path, cfg: RunConfig, final: dict[str, Any],
         low, high = wilson_interval(k, n)
         pos = float(np.median(rep["episode_position_errors"])) * 1000
         yaw = float(np.median(rep["episode_orientation_errors"]))
-        lines.append(f"| {LABELS[dyn]} | **{k / n:.0%}** ({k}/{n}) | {low:.0%}-{high:.0%} | "
+        lines.append(f"| {DYNAMICS_LABELS[dyn]} | **{k / n:.0%}** ({k}/{n}) | {low:.0%}-{high:.0%} | "
                      f"{rep['mean_return']:.1f} | {pos:.1f} mm | {yaw:.3f} rad | {n} |")
     other = "mujoco" if cfg.dynamics == "fignet" else "fignet"
     gap = final["eval"][cfg.dynamics]["success_rate"] - final["eval"][other]["success_rate"]
-    lines += ["", f"Success on the training dynamics ({trained}) minus on {LABELS[other]}: "
+    lines += ["", f"Success on the training dynamics ({trained}) minus on {DYNAMICS_LABELS[other]}: "
               f"{gap * 100:+.0f} points.", ""]
     lines += [
         "## Budget",
