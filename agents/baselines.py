@@ -1,7 +1,8 @@
 """Reference agents for the planning benchmark: do nothing, act at random.
 
-They share the planners' interface (``reset``, ``bind``, ``plan``, ``last``, SB3's ``predict``)
-so that :func:`~fignet_gym.agents.planners.run_episode` and the ``fignet-gym plan`` table treat
+They (and :class:`~fignet_gym.agents.policy_agent.PolicyAgent`) share the planners' interface
+(``reset``, ``bind``, ``plan``, ``last``, SB3's ``predict``) so that
+:func:`~fignet_gym.agents.planners.run_episode` and the ``fignet-gym plan`` table treat
 them like any planner.
 """
 
@@ -16,8 +17,9 @@ import numpy as np
 from fignet_gym.agents.planners import PlanInfo
 
 
-class _Baseline:
-    """Shared plumbing: binding, timing, SB3 ``predict``."""
+class ReactiveAgent:
+    """An agent that acts without a model; subclasses give the action (``_act``). Shared
+    plumbing: binding, timing (``last``), SB3 ``predict``."""
 
     prediction = None
 
@@ -42,11 +44,12 @@ class _Baseline:
         """``float32[A]`` action for ``env``'s current state."""
         self.bind(env)
         start, cpu = time.perf_counter(), time.process_time()
-        action = self._act(env.action_space)
+        action = self._act(self.env)
         self.last = PlanInfo(np.nan, 0, 0, time.perf_counter() - start, time.process_time() - cpu)
         return action
 
-    def _act(self, space: gym.spaces.Box) -> np.ndarray:
+    def _act(self, env: gym.Env) -> np.ndarray:
+        """``float32[A]`` action in the bound (unwrapped) ``env``'s current state."""
         raise NotImplementedError
 
     def predict(
@@ -58,19 +61,20 @@ class _Baseline:
             raise RuntimeError("bind(env) first")
         obs = np.asarray(observation)
         n = obs.shape[0] if obs.ndim == 2 else None
-        acts = np.stack([self._act(self.env.action_space) for _ in range(n or 1)])
+        acts = np.stack([self._act(self.env) for _ in range(n or 1)])
         return (acts if n is not None else acts[0]), state
 
 
-class IdleAgent(_Baseline):
+class IdleAgent(ReactiveAgent):
     """Always the zero action (Push: the tip stays put; Toss: the middle release velocity)."""
 
-    def _act(self, space: gym.spaces.Box) -> np.ndarray:
-        return np.zeros(space.shape, dtype=np.float32)
+    def _act(self, env: gym.Env) -> np.ndarray:
+        return np.zeros(env.action_space.shape, dtype=np.float32)
 
 
-class RandomAgent(_Baseline):
+class RandomAgent(ReactiveAgent):
     """Uniform random actions in the action box, seeded (``reset`` restarts the sequence)."""
 
-    def _act(self, space: gym.spaces.Box) -> np.ndarray:
+    def _act(self, env: gym.Env) -> np.ndarray:
+        space = env.action_space
         return self.rng.uniform(space.low, space.high).astype(np.float32)

@@ -7,16 +7,15 @@ policy (e.g. :func:`~fignet_gym.agents.load_policy`'s) stand beside the planners
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from fignet_gym.agents.planners import PlanInfo
+from fignet_gym.agents.baselines import ReactiveAgent
 
 
-class PolicyAgent:
+class PolicyAgent(ReactiveAgent):
     """Acts with ``policy.predict`` on the env's current observation.
 
     Args:
@@ -28,22 +27,17 @@ class PolicyAgent:
     def __init__(self, policy: Any, deterministic: bool = True) -> None:
         self.policy = policy
         self.deterministic = deterministic
-        self.env: gym.Env | None = None
-        self.last: PlanInfo | None = None
+        super().__init__()
 
-    def reset(self, seed: int | None = None) -> None:
-        """New episode (a feed-forward policy keeps no state)."""
-        self.last = None
-
-    def bind(self, env: gym.Env) -> None:
-        """Act in ``env`` from now on."""
-        self.env = getattr(env, "unwrapped", env)
-
-    def plan(self, env: gym.Env) -> np.ndarray:
-        """``float32[A]`` action for ``env``'s current observation (``env.unwrapped.observe()``)."""
-        self.bind(env)
-        start, cpu = time.perf_counter(), time.process_time()
-        obs = np.asarray(self.env.observe(), dtype=np.float32)[None]
+    def _act(self, env: gym.Env) -> np.ndarray:
+        obs = np.asarray(env.observe(), dtype=np.float32)[None]
         action, _ = self.policy.predict(obs, deterministic=self.deterministic)
-        self.last = PlanInfo(np.nan, 0, 0, time.perf_counter() - start, time.process_time() - cpu)
         return np.asarray(action, dtype=np.float32)[0]
+
+    def predict(
+        self, observation: np.ndarray, state: Any = None, episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, Any]:
+        """SB3's policy interface: the wrapped policy's own ``predict`` (``float[N, D]`` ->
+        ``float32[N, A]``)."""
+        return self.policy.predict(observation, state, episode_start, deterministic)

@@ -97,8 +97,7 @@ def _spread(values: Sequence[float], points: bool = False) -> str:
     points (``points``)."""
     def fmt(x: float) -> str:
         return f"{100 * x:+.0f} pts" if points else f"{x:.0%}"
-    mean = sum(values) / len(values)
-    return f"{fmt(mean)} [{fmt(min(values))}, {fmt(max(values))}]"
+    return f"{fmt(statistics.mean(values))} [{fmt(min(values))}, {fmt(max(values))}]"
 
 
 def transfer_table(runs: Sequence[str | os.PathLike]) -> str:

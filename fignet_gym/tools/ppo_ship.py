@@ -35,22 +35,25 @@ from fignet_gym.tools.ppo import OPTIONS, config_from_args
 NAME = re.compile(r"^[a-z0-9][a-z0-9._-]*$")
 #: The periodic evaluations of a run.
 EVAL_CSV = "eval.csv"
-#: Two-sided 95% normal quantile of the Wilson score interval.
-Z95 = 1.959964
 
 
 class ShipError(ValueError):
     """A run that cannot be shipped, or a name or destination refused (one line)."""
 
 
-def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, float]:
-    """Wilson score interval ``(low, high)`` of a success rate from ``successes`` of ``n``."""
+def wilson_interval(successes: int, n: int) -> tuple[float, float]:
+    """95% Wilson score interval ``(low, high)`` of a success rate from ``successes`` of ``n``."""
+    from scipy.stats import binomtest
+
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
-    p = successes / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return max(0.0, centre - half), min(1.0, centre + half)
+    ci = binomtest(successes, n).proportion_ci(confidence_level=0.95, method="wilson")
+    return float(ci.low), float(ci.high)
+
+
+def _flat(config: dict[str, Any]) -> dict[str, Any]:
+    """A run config's JSON with its ``ppo`` settings lifted to the top level."""
+    return {**{k: v for k, v in config.items() if k != "ppo"}, **config["ppo"]}
 
 
 def _value_text(value: Any) -> str:
@@ -73,8 +76,7 @@ def ppo_command(cfg: RunConfig, out: str) -> tuple[list[str], list[str]]:
     An option goes into the command when the command reads it unconditionally or when leaving
     it out would change the config (so settings at the command's fallbacks stay implicit).
     """
-    data = cfg.to_json()
-    flat = {**{k: v for k, v in data.items() if k != "ppo"}, **data["ppo"]}
+    flat = _flat(cfg.to_json())
     values: dict[str, Any] = {"env": cfg.env_id, "simulator": cfg.simulator,
                               "no_normalize": not (cfg.norm_obs or cfg.norm_reward)}
     options = {"env": "--env", "simulator": "--simulator", "no_normalize": "--no-normalize"}
@@ -99,7 +101,7 @@ def ppo_command(cfg: RunConfig, out: str) -> tuple[list[str], list[str]]:
             args += [option] if value else []
         elif value is not None:
             args += [option, _value_text(value)]
-    again = {**{k: v for k, v in full.items() if k != "ppo"}, **full["ppo"]}
+    again = _flat(full)
     return [*args, "--out", out], [k for k in flat if again.get(k) != flat[k]]
 
 
@@ -202,8 +204,7 @@ def policy_card(name: str, run: Path, cfg: RunConfig, final: dict[str, Any],
     if unset:
         lines += [f"Settings no option of `fignet-gym ppo` sets (from `{CONFIG}`): "
                   + ", ".join(f"`{k}`" for k in unset) + ".", ""]
-    data = cfg.to_json()
-    flat = {**{k: v for k, v in data.items() if k != "ppo"}, **data["ppo"]}
+    flat = _flat(cfg.to_json())
     lines += ["| setting | value |", "|---|---|"]
     lines += [f"| `{k}` | `{json.dumps(v)}` |" for k, v in flat.items()]
     lines += ["", f"## Periodic evaluation ({cfg.eval_episodes} episodes each)", ""]
