@@ -21,6 +21,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+import mujoco
 import numpy as np
 import pytest
 import torch
@@ -177,6 +178,22 @@ def test_plan_resume_refuses_other_settings(plan_run: Path, tmp_path: Path, chan
     before = snapshot(out)
     assert main(_with([*PLAN, "--videos", "1", "--out", str(out), "--resume"], change)) == 2
     one_error_line(capsys, "run.json", needle)
+    assert snapshot(out) == before
+
+
+def test_plan_resume_refuses_another_mujoco(plan_run: Path, tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """A line's episodes are reproducible only on one MuJoCo / torch: a resume on another
+    stack would mix two samples under one label."""
+    out = tmp_path / "run"
+    shutil.copytree(plan_run, out)
+    settings = json.loads((out / "run.json").read_text())
+    assert settings["software"]["mujoco"] == mujoco.__version__
+    settings["software"]["mujoco"] = "3.2.0"
+    (out / "run.json").write_text(json.dumps(settings))
+    before = snapshot(out)
+    assert main([*PLAN, "--videos", "1", "--out", str(out), "--resume"]) == 2
+    one_error_line(capsys, "run.json", "'3.2.0'")
     assert snapshot(out) == before
 
 

@@ -77,6 +77,16 @@ def check_arguments(args: argparse.Namespace) -> None:
             raise PlanError(f"--{name} must be an integer >= {low}, got {value!r}")
 
 
+def software() -> dict[str, str]:
+    """Versions of the libraries whose numerics decide an episode: a planned episode is
+    deterministic given its seed on one stack, but contact-rich episodes diverge between MuJoCo
+    or torch versions (docs/experiments.md, Planning), so a line is not resumed across them."""
+    import mujoco
+    import torch
+
+    return {"mujoco": mujoco.__version__, "torch": torch.__version__}
+
+
 def _run_files(out: Path) -> list[Path]:
     if not out.is_dir():
         return []
@@ -334,7 +344,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     meta = {"env": args.env, "planner": args.planner, "dynamics": args.dynamics,
             "act_dynamics": args.act_dynamics, "checkpoint": args.checkpoint,
             "config": config.__dict__ if config is not None else None, "seed": args.seed,
-            "threads": args.threads}
+            "threads": args.threads, "software": software()}
     meta = json.loads(json.dumps(meta))  # as stored: tuples become lists
     with output_lock(out):
         rows = prepare_run_folder(out, args, meta)
