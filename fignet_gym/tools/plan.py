@@ -58,7 +58,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--videos", type=int_at_least(0), default=0,
                    help="side-by-side videos of the first K")
     p.add_argument("--resume", action="store_true", help="skip episodes already in OUT (the "
-                   "settings must be the run's: env, planner, dynamics, checkpoint, budget, seed)")
+                   "settings must be the run's: env, planner, dynamics, checkpoint, budget, seed, "
+                   "MuJoCo and torch versions)")
     p.add_argument("--force", action="store_true", help="replace a run already in OUT")
     p.add_argument("--horizon", type=int, help="override the preset planning horizon")
     p.add_argument("--population", type=int, help="override the preset candidates per iteration")
