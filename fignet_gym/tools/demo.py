@@ -99,8 +99,8 @@ def _mpc(out: Path, episodes: int, quick: bool) -> dict[str, Any]:
         raise ValueError(f"{DEMO_POLICY}: trained for {policy.env_id} {policy.env_kwargs}, "
                          f"the demo runs {DEMO_ENV}")
     trained = DYNAMICS_LABELS.get(policy.config.dynamics, policy.config.dynamics)
-    labels = {**{name: f"plans on {DYNAMICS_LABELS[name]}" for name in models},
-              "ppo": f"PPO (trained on {trained})"}
+    labels = {name: f"plans on {DYNAMICS_LABELS[name]}" for name in models}
+    labels["ppo"] = f"PPO (trained on {trained})"
     agents = {name: (lambda env, dyn=dyn: make_planner("cem", dyn, "push", env=env, **budget))
               for name, dyn in models.items()}
     agents["ppo"] = lambda env: PolicyAgent(policy)
