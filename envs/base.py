@@ -44,6 +44,9 @@ class MjDynamicsEnv(gym.Env[np.ndarray, np.ndarray]):
 
     metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 50}
     scene_type: str = ""
+    #: Shipped simulator ``dynamics="fignet"`` loads without ``checkpoint=`` (default: the
+    #: :attr:`scene_type`'s); an old env version names the model trained on its physics.
+    default_checkpoint: str = ""
     observation_layout: dict[str, slice] = {}
 
     def __init__(
@@ -64,6 +67,9 @@ class MjDynamicsEnv(gym.Env[np.ndarray, np.ndarray]):
             )
         self.model = model
         self.frame_skip = int(frame_skip)
+        if (checkpoint is None and dynamics == "fignet" and self.default_checkpoint
+                and self.default_checkpoint != self.scene_type):
+            checkpoint = self.default_checkpoint
         self.dynamics = make_dynamics(
             dynamics, checkpoint, self.scene_type, **(dynamics_kwargs or {})
         )

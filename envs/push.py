@@ -1,4 +1,5 @@
-"""``fignet_gym/Push-v0`` and ``Push-v1``: planar pushing in the MIT Pushing setting."""
+"""``fignet_gym/Push-v2`` (and the deprecated ``Push-v0``, ``Push-v1``): planar pushing in the MIT
+Pushing setting."""
 
 from __future__ import annotations
 
@@ -20,7 +21,10 @@ from fignet_gym.envs.base import (
 )
 from fignet_gym.envs.tasks import PushTask
 from fignet_gym.envs.vector import SingleEnvVectorEnv
-from fignet_gym.mjcf import push_object, push_scene_xml
+from fignet_gym.mjcf import DEFAULT_CONE, push_object, push_scene_xml
+
+#: The shipped push simulator trained on each friction cone's data (Push-v2 and Push-v0/v1).
+PRETRAINED_BY_CONE = {"elliptic": "push", "pyramidal": "push-pyramidal"}
 
 
 class PushEnv(MjDynamicsEnv):
@@ -112,8 +116,16 @@ class PushEnv(MjDynamicsEnv):
     | width | ``480`` | rendered frame width (px) |
     | height | ``480`` | rendered frame height (px) |
     | dynamics_kwargs | ``None`` | extra dynamics arguments (e.g. fignet's ``max_distance``) |
+    | cone | ``"elliptic"`` | MuJoCo friction cone; ``"pyramidal"``: Push-v0/v1's physics |
 
     ## Version History
+
+    * v2: isotropic friction (MuJoCo's elliptic cone); the task is v1's. Under v0/v1's pyramidal
+      cone a push turns the object by a different angle at each world heading (-1.9 to -12.4 deg
+      for one push over 12 headings; -8.73 deg at every heading with the elliptic cone), so the
+      learned model could only learn the average turn. ``dynamics="fignet"`` loads the ``push``
+      model trained on isotropic pushes; v0 and v1 keep the pyramidal cone and load
+      ``push-pyramidal``, the model trained on their physics. v0 and v1 are deprecated.
 
     * v1: a task a planner with a perfect model solves (MPC with MuJoCo as its model: see
       ``docs/experiments.md``, "Planning"). The tip starts 5 mm behind the object on the side
@@ -172,6 +184,7 @@ class PushEnv(MjDynamicsEnv):
         width: int = 480,
         height: int = 480,
         dynamics_kwargs: dict[str, Any] | None = None,
+        cone: str = DEFAULT_CONE,
     ) -> None:
         check_arguments(
             "PushEnv", friction=(friction, "positive"), tip_friction=(tip_friction, "positive?"),
@@ -186,7 +199,9 @@ class PushEnv(MjDynamicsEnv):
             width=(width, "count"), height=(height, "count"))
         obj = push_object(shape)
         #: The scene's MJCF (object at the origin; recorded trajectories store their poses).
-        self.mjcf = push_scene_xml(shape, friction=friction, tip_friction=tip_friction)
+        self.mjcf = push_scene_xml(shape, friction=friction, tip_friction=tip_friction, cone=cone)
+        self.cone = cone
+        self.default_checkpoint = PRETRAINED_BY_CONE[cone]
         model = compile_with_history(self.mjcf)
         self.shape = shape
         self.max_speed = float(max_speed)

@@ -177,7 +177,7 @@ def build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser("demo", help="MPC planning on the shipped learned simulator vs on MuJoCo, "
                        "acting in MuJoCo (table, video, plot)")
     d.add_argument("--out", default="outputs/demo", help="folder for videos, plots and JSON")
-    d.add_argument("--episodes", type=int, default=3, help="seeded Push-v1 episodes per model")
+    d.add_argument("--episodes", type=int, default=3, help="seeded Push-v2 episodes per model")
     d.add_argument("--rollouts", action="store_true",
                    help="also compare open-loop rollouts of the shipped simulators with MuJoCo")
     d.add_argument("--quick", action="store_true", help="a tiny budget (for tests)")
@@ -256,7 +256,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=_ship)
 
     o = sub.add_parser("ppo", help="train PPO on either dynamics (resumable), evaluate on both")
-    o.add_argument("--env", default="fignet_gym/Push-v1", help="environment id")
+    o.add_argument("--env", default="fignet_gym/Push-v2", help="environment id")
     o.add_argument("--dynamics", choices=["mujoco", "fignet"], required=True,
                    help="training dynamics (evaluation always runs on both)")
     o.add_argument("--steps", type=int, required=True, help="environment steps in total")

@@ -23,16 +23,28 @@ PUSH_V1_KWARGS: dict[str, Any] = {
     "success_yaw": 0.2,
     "success_weight": 1.0,
 }
+#: Push-v2's: v1's task under isotropic friction (``PushEnv``'s Version History).
+PUSH_V2_KWARGS: dict[str, Any] = {**PUSH_V1_KWARGS, "cone": "elliptic"}
 #: Registered ids: (entry point, vector entry point, episode step limit or None, arguments).
 ENV_SPECS: dict[str, tuple[str, str, int | None, dict[str, Any]]] = {
     "fignet_gym/Push-v0": (
-        "fignet_gym.envs.push:PushEnv", "fignet_gym.envs.push:PushVectorEnv", 50, {}
+        "fignet_gym.envs.push:PushEnv", "fignet_gym.envs.push:PushVectorEnv", 50,
+        {"cone": "pyramidal"},
     ),
     "fignet_gym/Push-v1": (
-        "fignet_gym.envs.push:PushEnv", "fignet_gym.envs.push:PushVectorEnv", 75, PUSH_V1_KWARGS
+        "fignet_gym.envs.push:PushEnv", "fignet_gym.envs.push:PushVectorEnv", 75,
+        {**PUSH_V1_KWARGS, "cone": "pyramidal"},
+    ),
+    "fignet_gym/Push-v2": (
+        "fignet_gym.envs.push:PushEnv", "fignet_gym.envs.push:PushVectorEnv", 75, PUSH_V2_KWARGS
     ),
     "fignet_gym/Toss-v0": (
-        "fignet_gym.envs.toss:TossEnv", "fignet_gym.envs.toss:TossVectorEnv", None, {}
+        "fignet_gym.envs.toss:TossEnv", "fignet_gym.envs.toss:TossVectorEnv", None,
+        {"cone": "pyramidal"},
+    ),
+    "fignet_gym/Toss-v1": (
+        "fignet_gym.envs.toss:TossEnv", "fignet_gym.envs.toss:TossVectorEnv", None,
+        {"cone": "elliptic"},
     ),
     "fignet_gym/RealPush-v0": (
         "fignet_gym.envs.real_push:RealPushEnv", "fignet_gym.envs.real_push:RealPushVectorEnv", 75, {}

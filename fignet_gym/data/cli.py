@@ -19,6 +19,7 @@ from pathlib import Path
 
 from fignet_gym.atomic import output_lock, write_text
 from fignet_gym.data.format import TrajectoryFormatError
+from fignet_gym.mjcf.assets import CONES, DEFAULT_CONE
 
 
 def int_at_least(low: int) -> Callable[[str], int]:
@@ -113,6 +114,7 @@ def _generate(args: argparse.Namespace) -> int:
         cfg = replace(cfg, duration=args.duration)
     if args.substeps is not None:
         cfg = replace(cfg, substeps=args.substeps)
+    cfg = replace(cfg, cone=args.cone)
     with _writing(args.out, args.force):
         stats = generate(args.kind, args.num, args.seed, args.out, workers=args.workers,
                          config=cfg, progress=not args.no_progress)
@@ -284,6 +286,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="seconds per trajectory (default: 1.0 push, 2.0 toss)")
     g.add_argument("--substeps", type=int_at_least(1), default=None,
                    help="MuJoCo steps of 2 ms per stored pose (default 10: dt = 0.02 s)")
+    g.add_argument("--cone", choices=CONES, default=DEFAULT_CONE,
+                   help="MuJoCo friction cone (default elliptic: isotropic friction; pyramidal: "
+                        "the data of Push-v0/v1, Toss-v0 and the first shipped models)")
     g.add_argument("--sphere-subdivisions", type=int_at_least(0), default=1,
                    help="toss: icosphere level of spheres (1: 42 nodes)")
     g.add_argument("--cylinder-sections", type=int_at_least(3), default=12,

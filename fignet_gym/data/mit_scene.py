@@ -84,6 +84,11 @@ def convex_pieces(outline: np.ndarray) -> list[np.ndarray]:
     return pieces
 
 
+#: Cone of the imported scenes' nominal MuJoCo: the scene every published sim2real figure of the
+#: nominal baseline was measured on. The fitted models (``push-real.mujoco.json``) set their own.
+NOMINAL_CONE = "pyramidal"
+
+
 def real_push_scene_xml(
     name: str, outline: np.ndarray, mass: float, inertia_z: float, friction: float = 0.25, *,
     thickness: float = REAL_THICKNESS, tip_radius: float = TIP_RADIUS, timestep: float = 0.002,
@@ -109,4 +114,4 @@ def real_push_scene_xml(
         inertia=inertia, thickness=thickness, object_pose=object_pose, tip_xy=tip_xy, tip_z=TIP_Z,
         tip_radius=tip_radius, tip_half_height=_TIP_HALF_HEIGHT, floor_half_size=floor_half_size,
         friction=friction, tip_friction=friction, contact_timeconst=contact_timeconst,
-        tip_dampratio=tip_dampratio)
+        tip_dampratio=tip_dampratio, cone=NOMINAL_CONE)

@@ -12,7 +12,7 @@ import numpy as np
 
 from fignet_gym.data.format import Trajectory
 from fignet_gym.data.generator_base import GENERATED_SOURCE, GENERATOR_VERSION, GenerationError, num_poses
-from fignet_gym.mjcf import MIT_OBJECTS, PushObject, push_scene_xml
+from fignet_gym.mjcf import DEFAULT_CONE, MIT_OBJECTS, PushObject, push_scene_xml
 from fignet_gym.simulator.scene import Scene
 
 #: Contact points on a polygon side are drawn from this fraction of its length (corners excluded).
@@ -41,6 +41,8 @@ class PushConfig:
             the trajectory ends first (slow pushes).
         duration: seconds per trajectory. timestep, substeps: MuJoCo step and steps per pose.
         tip_radius: m.
+        cone: MuJoCo friction cone (``"elliptic"``: isotropic, the same push in the object's
+            frame at every world heading; ``"pyramidal"``: the first push data).
     """
 
     shapes: tuple[str, ...] = tuple(MIT_OBJECTS)
@@ -55,6 +57,7 @@ class PushConfig:
     timestep: float = 0.002
     substeps: int = 10
     tip_radius: float = 0.00475
+    cone: str = DEFAULT_CONE
 
     @property
     def dt(self) -> float:
@@ -161,11 +164,11 @@ def generate_push(rng: np.random.Generator, cfg: PushConfig) -> Trajectory:
         "tip_velocity": (direction * speed).tolist(),
         "tip_contact_time": approach / speed,
         "tip_stop_time": (approach + cfg.travel_past) / speed,
-        "timestep": cfg.timestep, "substeps": cfg.substeps,
+        "timestep": cfg.timestep, "substeps": cfg.substeps, "cone": cfg.cone,
     }
     mjcf = push_scene_xml(shape, friction, cfg.tip_radius, cfg.timestep,
                           tip_friction=tip_friction, object_pose=(0.0, 0.0, yaw0),
-                          tip_xy=start)
+                          tip_xy=start, cone=cfg.cone)
     poses, scene = simulate_push(mjcf, meta, num_poses(cfg.duration, cfg.dt), cfg.substeps)
     if not np.isfinite(poses).all():
         raise GenerationError(f"push {shape}: simulation diverged")

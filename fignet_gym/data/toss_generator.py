@@ -11,7 +11,7 @@ import numpy as np
 from fignet_gym.data.format import Trajectory
 from fignet_gym.data.generator_base import GENERATED_SOURCE, GENERATOR_VERSION, GenerationError, num_poses
 from fignet_gym.data.push_generator import PoseHook
-from fignet_gym.mjcf import MATERIALS, SIMPLE_SHAPES, TOSS_SHAPES, TossObject, toss_scene_xml, unit_shape_mesh
+from fignet_gym.mjcf import DEFAULT_CONE, MATERIALS, SIMPLE_SHAPES, TOSS_SHAPES, TossObject, toss_scene_xml, unit_shape_mesh
 from fignet_gym.simulator.scene import MeshOptions, Scene
 
 #: Lowest point (m) of a placed object above the floor at the start.
@@ -39,6 +39,8 @@ class TossConfig:
             still leaves it are redrawn.
         mesh_options: resolution of the simple shapes (default 8-node cube, 42-node sphere,
             26-node cylinder; the paper's MOVi-A meshes have 51 and 64 nodes).
+        cone: MuJoCo friction cone (``"elliptic"``: isotropic, a toss turned about the vertical
+            lands turned; ``"pyramidal"``: the first toss data).
     """
 
     shapes: tuple[str, ...] | None = None
@@ -56,6 +58,7 @@ class TossConfig:
     timestep: float = 0.002
     substeps: int = 10
     mesh_options: MeshOptions = field(default_factory=MeshOptions)
+    cone: str = DEFAULT_CONE
 
     @property
     def dt(self) -> float:
@@ -159,7 +162,8 @@ def generate_toss(rng: np.random.Generator, cfg: TossConfig, max_attempts: int =
         vel = np.zeros((n, 6))
         vel[:, :2] = rng.uniform(-cfg.max_speed, cfg.max_speed, size=(n, 2)) - poses0[:, :2]
         mjcf = toss_scene_xml(objects, cfg.timestep, cfg.floor_half_size, cfg.mesh_options,
-                              poses=poses0, velocities=vel, gravity=cfg.gravity)
+                              poses=poses0, velocities=vel, gravity=cfg.gravity,
+                              cone=cfg.cone)
         poses, scene = simulate_toss(mjcf, num_poses(cfg.duration, cfg.dt), cfg.substeps)
         dyn = scene.dynamic_mask.numpy()
         if not np.isfinite(poses).all():

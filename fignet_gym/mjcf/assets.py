@@ -14,6 +14,19 @@ CONVEX_TOL = 1e-12
 TORSIONAL_FRICTION, ROLLING_FRICTION = 0.005, 0.0001
 #: Offscreen render buffer (pixels per side) of every scene, enough for the viewer's videos.
 OFFSCREEN_SIZE = 640
+#: MuJoCo friction cones. The elliptic one is isotropic in the contact plane; the pyramidal one
+#: (MuJoCo's default) approximates the friction disc by a polygon fixed in the contact frame, so a
+#: push or a landing turns an object differently at each world heading (issue 38).
+CONES = ("elliptic", "pyramidal")
+#: The cone of every generated scene and of the current env versions (Push-v2, Toss-v1).
+DEFAULT_CONE = "elliptic"
+
+
+def check_cone(cone: str) -> str:
+    """``cone`` if it is one of :data:`CONES`; ``ValueError`` naming the valid ones otherwise."""
+    if cone not in CONES:
+        raise ValueError(f"unknown friction cone {cone!r}; valid: {', '.join(CONES)}")
+    return cone
 
 
 def prism_mesh(outline: np.ndarray, thickness: float) -> tuple[np.ndarray, np.ndarray]:

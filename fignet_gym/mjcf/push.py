@@ -9,7 +9,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from fignet_gym.mjcf.assets import (
+    DEFAULT_CONE,
     GRID_TEXTURE,
+    check_cone,
     fmt_numbers,
     friction_attr,
     mesh_asset,
@@ -139,6 +141,7 @@ def push_scene_xml(
     timestep: float = 0.002, floor_half_size: float = 0.5, *, tip_friction: float | None = None,
     object_pose: Sequence[float] = (0.0, 0.0, 0.0), tip_xy: Sequence[float] = (-0.15, 0.0),
     tip_half_height: float = 0.02, contact_timeconst: float = 0.005, tip_dampratio: float = 0.5,
+    cone: str = DEFAULT_CONE,
 ) -> str:
     """MJCF of one MIT Pushing object on a floor, with a cylindrical mocap pusher ("tip").
 
@@ -159,6 +162,9 @@ def push_scene_xml(
             timesteps) and an under-damped tip (0.5) keep that to 1.3 mm at 500 mm/s (0.14 mm at
             50 mm/s) without bounces; MuJoCo's default 0.02 s sinks the tip 9 mm and tilts the
             object by 5 degrees at 400 mm/s.
+        cone: MuJoCo friction cone (:data:`fignet_gym.mjcf.assets.CONES`). ``"elliptic"`` makes
+            friction isotropic, so a push gives the same motion in the object's frame at every
+            world heading; ``"pyramidal"`` is the scene of Push-v0/v1 and the first push data.
     """
     obj = push_object(shape)
     tip_friction = friction if tip_friction is None else tip_friction
@@ -174,7 +180,7 @@ def push_scene_xml(
         mass=obj.mass, com=com, inertia=inertia, thickness=obj.thickness, object_pose=(x, y, yaw),
         tip_xy=tip_xy, tip_z=tip_z, tip_radius=tip_radius, tip_half_height=tip_half_height,
         floor_half_size=floor_half_size, friction=friction, tip_friction=tip_friction,
-        contact_timeconst=contact_timeconst, tip_dampratio=tip_dampratio)
+        contact_timeconst=contact_timeconst, tip_dampratio=tip_dampratio, cone=cone)
 
 
 def push_scene_text(
@@ -182,16 +188,17 @@ def push_scene_text(
     inertia: np.ndarray, thickness: float, object_pose: Sequence[float], tip_xy: Sequence[float],
     tip_z: float, tip_radius: float, tip_half_height: float, floor_half_size: float,
     friction: float, tip_friction: float, contact_timeconst: float, tip_dampratio: float,
+    cone: str,
 ) -> str:
     """MJCF text of a pushing scene: floor, a free ``object`` body holding ``geoms`` (MJCF text of
     its geoms over the ``meshes`` assets), with ``com float[3]`` and ``inertia float[6]``
-    (full inertia), and the mocap ``tip`` cylinder. Shared by :func:`push_scene_xml` and the
+    (full inertia), and the mocap ``tip`` cylinder, under friction ``cone``. Shared by :func:`push_scene_xml` and the
     real-outline scenes of :mod:`fignet_gym.data.mit_scene`."""
     x, y, yaw = (float(v) for v in object_pose)
     solref = f'{contact_timeconst} 1'
     return f"""<mujoco model="{name}">
   <compiler angle="radian"/>
-  <option timestep="{timestep}" gravity="0 0 -9.81"/>
+  <option timestep="{timestep}" gravity="0 0 -9.81" cone="{check_cone(cone)}"/>
   {visual_header()}
   <asset>
     {GRID_TEXTURE}

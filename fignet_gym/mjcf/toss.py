@@ -11,7 +11,9 @@ import trimesh
 
 from fignet_gym.mjcf.assets import (
     CONTACT_TIMECONST,
+    DEFAULT_CONE,
     GRID_TEXTURE,
+    check_cone,
     fmt_numbers,
     friction_attr,
     mesh_asset,
@@ -177,7 +179,7 @@ def unit_shape_mesh(
 def toss_scene_xml(
     objects: Sequence[TossObject], timestep: float = 0.002, floor_half_size: float = 10.0,
     mesh_options: MeshOptions | None = None, *, poses: np.ndarray | None = None,
-    velocities: np.ndarray | None = None, gravity: float = -10.0,
+    velocities: np.ndarray | None = None, gravity: float = -10.0, cone: str = DEFAULT_CONE,
 ) -> str:
     """MJCF of objects ``obj0 .. objK-1`` (free joints, mesh geoms) above a Kubric-like floor.
 
@@ -189,6 +191,9 @@ def toss_scene_xml(
             MuJoCo's ``qvel``); stored with ``poses`` in a keyframe ``start``, so
             ``mj_resetDataKeyframe(model, data, 0)`` restores the exact initial state.
         gravity: along z (Kubric: -10).
+        cone: MuJoCo friction cone (:data:`fignet_gym.mjcf.assets.CONES`); ``"elliptic"`` (the
+            default) lands an object the same way at every world heading, ``"pyramidal"`` is the
+            scene of Toss-v0 and the first toss data.
     """
     k = len(objects)
     if k == 0:
@@ -227,7 +232,7 @@ def toss_scene_xml(
     newline = "\n    "
     return f"""<mujoco model="toss">
   <compiler angle="radian"/>
-  <option timestep="{timestep}" gravity="0 0 {gravity}"/>
+  <option timestep="{timestep}" gravity="0 0 {gravity}" cone="{check_cone(cone)}"/>
   {visual_header()}
   <asset>
     {GRID_TEXTURE}

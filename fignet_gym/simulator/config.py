@@ -74,6 +74,10 @@ class SimulatorConfig:
             paper, which shape-matches only in rollouts). The network may then express a contact
             as a force at the nodes it touches, and the projection turns it into the torque about
             the centroid analytically, instead of each node having to compute ``alpha x r``.
+        canonical_frame: see every scene in a frame that turns and shifts with it
+            (:mod:`fignet_gym.simulator.symmetry`), which makes every prediction exactly
+            equivariant under turns about the vertical and horizontal shifts. Needs vertical
+            ``gravity``. Off in checkpoints saved before it existed.
         scene_type: what the model was trained on ("push", "toss", ...; "" = unspecified).
         mesh_options: how MuJoCo primitives are meshed for this model.
     """
@@ -91,6 +95,7 @@ class SimulatorConfig:
     gravity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     next_separation: bool = False
     rigid_output: bool = False
+    canonical_frame: bool = False
     scene_type: str = ""
     mesh_options: MeshOptions = field(default_factory=MeshOptions)
 
@@ -99,6 +104,8 @@ class SimulatorConfig:
             raise ValueError(f"collision must be 'face' or 'node', got {self.collision!r}")
         if self.history < 1 or self.dt <= 0 or self.collision_radius <= 0:
             raise ValueError("history >= 1, dt > 0 and collision_radius > 0 are required")
+        if self.canonical_frame and any(g != 0 for g in self.gravity[:2]):
+            raise ValueError(f"canonical_frame needs vertical gravity, got {self.gravity}")
         check_config(self)  # bounded sizes: a config can never ask for unbounded memory
 
     @property

@@ -208,9 +208,25 @@ def _node_features(pos_hist: Tensor, kin: Tensor, kin_disp: Tensor, props: Tenso
     return torch.cat((with_norm(vel), props, kin[:, None], with_norm(kin_disp)), dim=-1)
 
 
+#: Distances within this fraction of the largest one count as equal in :func:`tie_stable_order`.
+TIE_TOLERANCE = 1e-5
+
+
+def tie_stable_order(dist: Tensor) -> Tensor:
+    """``int64[C, 3]`` order of each row of ``dist float[C, 3]`` by increasing distance, with
+    distances equal to :data:`TIE_TOLERANCE` (relative) kept in column order. Unlike a plain
+    sort, the order of exact geometric ties does not depend on float rounding."""
+    tol = TIE_TOLERANCE * dist.amax(dim=1, keepdim=True)[..., None] + 1e-12
+    diff = dist[:, None, :] - dist[:, :, None]  # [C, i, j] = d_j - d_i
+    idx = torch.arange(dist.shape[1], device=dist.device)
+    before = (diff > tol) | ((diff.abs() <= tol) & (idx[:, None] < idx[None, :]))  # i before j
+    rank = before.sum(dim=1)  # how many come before j
+    return rank.argsort(dim=1, stable=True)
+
+
 def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, kin_disp: Tensor,
-                       clip: float = 0.0, face_groups: Sequence[FaceGroup] = ()
-                       ) -> tuple[Tensor, Tensor, Tensor]:
+                       clip: float = 0.0, face_groups: Sequence[FaceGroup] = (),
+                       sort_unclipped: bool = False) -> tuple[Tensor, Tensor, Tensor]:
     """Face-face hyper-edge features (paper eq. 1) with each face's nodes sorted by distance.
 
     Args:
@@ -220,6 +236,12 @@ def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, kin_d
         kin_disp: ``float[N, 3]`` next-step displacement of kinematic nodes (0 for the others).
         clip: spanning vectors longer than this are shortened (:func:`clip_length`; 0: off).
         face_groups: optional groups (:data:`FACE_GROUPS`) appended after the paper's columns.
+        sort_unclipped: sort each face's nodes by their true distance, equal distances (to a
+            relative 1e-5) in mesh order (:func:`tie_stable_order`). The clipped spans of a
+            large floor triangle all have the clip's length, and regular meshes (a pusher's
+            polygon) have nodes at equal distances, so the default sort (kept for the
+            checkpoints trained on it) orders them by float rounding, which a turn or a shift
+            of the scene changes.
 
     Returns:
         ``(senders int64[C, 3], receivers int64[C, 3], features float[C, 34 + group sizes])`` with
@@ -233,8 +255,12 @@ def face_edge_features(pos: Tensor, faces: Tensor, contacts: FaceContacts, kin_d
     # Normal from the original vertex order (outward by the mesh's winding), before sorting.
     n = torch.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0], dim=-1)
     n = n / n.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    span = clip_length(x - point[:, None, :], clip)
-    order = span.norm(dim=-1).argsort(dim=1, stable=True)
+    raw = x - point[:, None, :]
+    span = clip_length(raw, clip)
+    if sort_unclipped:
+        order = tie_stable_order(raw.norm(dim=-1))
+    else:
+        order = span.norm(dim=-1).argsort(dim=1, stable=True)
     nodes = torch.gather(nodes, 1, order)
     span = torch.gather(span, 1, order[..., None].expand(-1, -1, 3))
     d_rs = contacts.receiver_point - contacts.sender_point
@@ -269,7 +295,8 @@ def _static_features(scene: Scene, clip: float) -> dict[str, Tensor]:
 
 def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Tensor,
                 com_next: Tensor, contacts: FaceContacts, node_edges: tuple[Tensor, Tensor],
-                clip: float = 0.0, face_groups: Sequence[FaceGroup] = ()) -> Graph:
+                clip: float = 0.0, face_groups: Sequence[FaceGroup] = (),
+                sort_unclipped: bool = False) -> Graph:
     """Assemble all un-normalised input features.
 
     Args:
@@ -284,6 +311,7 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
         clip: length (m) above which face spanning vectors and object-mesh offsets are shortened
             (0: the paper's unclipped features).
         face_groups: optional face-edge feature groups (:data:`FACE_GROUPS`) to append.
+        sort_unclipped: see :func:`face_edge_features`.
     """
     static = _static_features(scene, clip)
     n = node_hist.shape[1]
@@ -305,7 +333,8 @@ def build_graph(scene: Scene, node_hist: Tensor, com_hist: Tensor, node_next: Te
     om_f = torch.cat((rel * flip, static["rel_ref"] * flip), dim=-1)
     mo_f = torch.cat((rel, static["rel_ref"]), dim=-1)
 
-    fs, fr, ff = face_edge_features(cur, scene.faces, contacts, kin_disp[:n], clip, face_groups)
+    fs, fr, ff = face_edge_features(cur, scene.faces, contacts, kin_disp[:n], clip, face_groups,
+                                    sort_unclipped)
     ns, nr = node_edges
     nf = with_norm(cur[ns] - cur[nr])
     return Graph(

@@ -38,6 +38,7 @@ from fignet_gym.simulator.graph import Graph, build_graph, feature_sizes
 from fignet_gym.simulator.networks import EncodeProcessDecode
 from fignet_gym.simulator.normalization import Normalizer
 from fignet_gym.simulator.scene import Scene
+from fignet_gym.simulator.symmetry import CanonicalFrame, canonical_frame, from_frame, to_frame
 
 #: Smallest RMS object radius (m) the default rotational noise is scaled by: a one-node object
 #: would otherwise get an infinite rotation.
@@ -152,7 +153,8 @@ class LearnedSimulator(nn.Module):
         node_hist, node_next, com_hist, com_next = nodes[:-1], nodes[-1], coms[:-1], coms[-1]
         contacts, node_edges = self.collide(scene, node_hist[-1])
         graph = build_graph(scene, node_hist, com_hist, node_next, com_next, contacts, node_edges,
-                            clip=self.config.feature_clip, face_groups=self.config.face_groups)
+                            clip=self.config.feature_clip, face_groups=self.config.face_groups,
+                            sort_unclipped=self.config.canonical_frame)
         return StepInputs(graph, node_hist, node_next, contacts)
 
     def collide(self, scene: Scene, node_pos: Tensor) -> tuple[FaceContacts, tuple[Tensor, Tensor]]:
@@ -225,26 +227,47 @@ class LearnedSimulator(nn.Module):
     def step_with_info(self, scene: Scene, history: Tensor, next_kinematic: Tensor
                        ) -> tuple[Tensor, StepInputs, Tensor]:
         """:meth:`step` that also returns its inputs and the shape-matching residual ``float[O]`` (m)."""
-        inputs = self.build_inputs(scene, history, next_kinematic)
+        frame = self._frame(scene, history[-1])
+        inputs = self.build_inputs(scene, *self._into(scene, frame, history, next_kinematic))
         # Inference mode skips autograd bookkeeping on the network's ~1000 ops; acc is only read
         # by out-of-place ops below, so no inference tensor escapes.
         with torch.inference_mode():
             acc = self.predict_acceleration(inputs.graph)
         pred = self._next_nodes(scene, inputs, acc)
         poses, residual = kabsch(scene.ref_vertices, pred, scene.node_object, scene.num_objects)
-        out = torch.where(scene.dynamic_mask[:, None], poses, next_kinematic)
+        out = torch.where(scene.dynamic_mask[:, None], self._out_of(scene, frame, poses),
+                          next_kinematic)
         return out, inputs, residual
+
+    def _frame(self, scene: Scene, current: Tensor) -> CanonicalFrame | None:
+        """The canonical frame of each scene at the current poses ``float[O, 7]``, or ``None``
+        without ``canonical_frame``. Not differentiated: predictions do not depend on it."""
+        if not self.config.canonical_frame:
+            return None
+        return canonical_frame(scene, current.detach())
+
+    @staticmethod
+    def _into(scene: Scene, frame: CanonicalFrame | None, *poses: Tensor) -> tuple[Tensor, ...]:
+        """Each pose tensor ``float[..., O, 7]`` in ``frame`` (unchanged when it is ``None``)."""
+        return poses if frame is None else tuple(to_frame(scene, p, frame) for p in poses)
+
+    @staticmethod
+    def _out_of(scene: Scene, frame: CanonicalFrame | None, poses: Tensor) -> Tensor:
+        """Canonical poses ``float[..., O, 7]`` back in the world."""
+        return poses if frame is None else from_frame(scene, poses, frame)
 
     def differentiable_step(self, scene: Scene, history: Tensor, next_kinematic: Tensor) -> Tensor:
         """:meth:`step` with gradients, for training through rollouts: the same prediction (in
         float32, normalisers fixed), shape matched by :func:`polar_fit`, which agrees with Kabsch
         to rounding but is differentiable for symmetric objects too. ``float[H, O, 7]``,
         ``float[O, 7]`` -> ``float[O, 7]``."""
-        inputs = self.build_inputs(scene, history, next_kinematic)
+        frame = self._frame(scene, history[-1])
+        inputs = self.build_inputs(scene, *self._into(scene, frame, history, next_kinematic))
         pred = self._next_nodes(scene, inputs, self.predict_acceleration(inputs.graph))
         poses = polar_fit(scene.ref_vertices, pred, scene.node_object, scene.num_objects,
                           scene.dynamic_mask)
-        return torch.where(scene.dynamic_mask[:, None], poses, next_kinematic)
+        return torch.where(scene.dynamic_mask[:, None], self._out_of(scene, frame, poses),
+                           next_kinematic)
 
     @staticmethod
     def _next_nodes(scene: Scene, inputs: StepInputs, acc: Tensor) -> Tensor:
@@ -288,6 +311,8 @@ class LearnedSimulator(nn.Module):
         """
         hist, nxt = poses[:-1], poses[-1]
         noisy = inputs if inputs is not None else self.pose_noise(scene, hist, generator, noise)
+        # The frame of the noisy inputs, as a step takes it from the poses it is given.
+        noisy, hist, nxt = self._into(scene, self._frame(scene, noisy[-1]), noisy, hist, nxt)
         inputs = self.build_inputs(scene, noisy, nxt)
         x_true_t = scene.node_positions(hist[-1])
         noise_last = inputs.node_hist[-1] - x_true_t

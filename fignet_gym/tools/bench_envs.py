@@ -30,7 +30,7 @@ import mujoco
 import numpy as np
 import torch
 
-ENV_IDS = {"push": "fignet_gym/Push-v0", "toss": "fignet_gym/Toss-v0"}
+ENV_IDS = {"push": "fignet_gym/Push-v2", "toss": "fignet_gym/Toss-v1"}
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """``fignet-gym collect``: record a planner's episodes, acted in MuJoCo, as training trajectories.
 
-    fignet-gym collect --env fignet_gym/Push-v1 --planner cem --episodes 200 --seed 100000 \\
+    fignet-gym collect --env fignet_gym/Push-v2 --planner cem --episodes 200 --seed 100000 \\
         --action-noise 0.3 --epsilon 0.1 --out data/push_plan.h5
 
 Model-based RL's usual remedy for a model that is wrong where the planner goes: train it on the
@@ -50,7 +50,7 @@ class CollectError(ValueError):
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The ``collect`` sub-command's arguments."""
-    p.add_argument("--env", default="fignet_gym/Push-v1", help="environment id (a push env)")
+    p.add_argument("--env", default="fignet_gym/Push-v2", help="environment id (a push env)")
     p.add_argument("--planner", default="cem", choices=PLANNERS)
     p.add_argument("--dynamics", default="mujoco", choices=["mujoco", "fignet"],
                    help="the planner's model (the episodes are always acted in MuJoCo)")
@@ -135,7 +135,7 @@ def _recordable(env: Any, env_id: str) -> str:
     xml = getattr(u, "mjcf", None)
     if not isinstance(xml, str) or getattr(u, "scene_type", "") != "push":
         raise CollectError(f"--env: {env_id} exposes no push scene MJCF (env.mjcf) to record; "
-                           "use fignet_gym/Push-v0 or fignet_gym/Push-v1")
+                           "use fignet_gym/Push-v0, Push-v1 or Push-v2")
     plain = mujoco.MjModel.from_xml_string(xml)
     for name in _MODEL_FIELDS:
         if not np.array_equal(getattr(plain, name), getattr(u.model, name)):

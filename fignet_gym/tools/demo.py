@@ -2,7 +2,7 @@
 
 ``fignet-gym demo`` (or ``bash scripts/demo.sh``):
 
-1. runs a few seeded ``Push-v1`` episodes in MuJoCo with a CEM planner whose model is the shipped
+1. runs a few seeded ``Push-v2`` episodes in MuJoCo with a CEM planner whose model is the shipped
    FIGNet push simulator, the same episodes with the same planner whose model is MuJoCo, and the
    same episodes with the shipped PPO policy (``load_policy("push-ppo")``, trained only on FIGNet);
 2. prints a table (success, final position and heading errors, CPU and wall seconds per action);
@@ -23,7 +23,7 @@ import numpy as np
 
 DEMO_SEED = 987_654  # far from the seeds of the shipped training and validation sets
 #: The task of the demo's episodes.
-DEMO_ENV = "fignet_gym/Push-v1"
+DEMO_ENV = "fignet_gym/Push-v2"
 #: The shipped PPO policy the demo shows beside the planners (trained for ``DEMO_ENV``).
 DEMO_POLICY = "push-ppo"
 
@@ -48,7 +48,7 @@ def _task(name: str, kind: str, num: int, out: Path, videos: int, horizon: int) 
 
 
 def _env_comparison(out: Path, steps: int = 40) -> dict[str, Any]:
-    """Same action sequence on Push-v1 with MuJoCo and with FIGNet dynamics."""
+    """Same action sequence on Push-v2 with MuJoCo and with FIGNet dynamics."""
     import gymnasium as gym
 
     import fignet_gym.envs  # noqa: F401 - registers the environments
@@ -57,7 +57,7 @@ def _env_comparison(out: Path, steps: int = 40) -> dict[str, Any]:
     actions = np.clip(np.array([[1.0, 0.0]]) + 0.3 * rng.normal(size=(steps, 2)), -1, 1)
     result: dict[str, Any] = {}
     for dyn in ("mujoco", "fignet"):
-        env = gym.make("fignet_gym/Push-v1", dynamics=dyn)
+        env = gym.make("fignet_gym/Push-v2", dynamics=dyn)
         obs, _ = env.reset(seed=0)
         t0 = time.perf_counter()
         total = 0.0
@@ -70,7 +70,7 @@ def _env_comparison(out: Path, steps: int = 40) -> dict[str, Any]:
                        "steps_per_s": steps / (time.perf_counter() - t0)}
         env.close()
     diff = np.abs(np.array(result["mujoco"]["final_obs"][:3]) - np.array(result["fignet"]["final_obs"][:3]))
-    print("\n=== Push-v1, same 40 actions on both dynamics ===")
+    print("\n=== Push-v2, same 40 actions on both dynamics ===")
     for dyn in ("mujoco", "fignet"):
         r = result[dyn]
         print(f"{dyn:7s} return {r['return']:8.3f}   {r['steps_per_s']:7.1f} env steps/s")
@@ -95,17 +95,20 @@ def _mpc(out: Path, episodes: int, quick: bool) -> dict[str, Any]:
     max_steps = 3 if quick else None
     models = {"fignet": make_dynamics("fignet", None, "push"), "mujoco": MujocoDynamics(nthread=1)}
     policy = load_policy(DEMO_POLICY)
-    if (policy.env_id, policy.env_kwargs) != (DEMO_ENV, {}):
+    # Push-v2 is Push-v1's task under isotropic friction: a policy of either version runs on it.
+    if (policy.env_id.rsplit("-v", 1)[0], policy.env_kwargs) != (DEMO_ENV.rsplit("-v", 1)[0], {}):
         raise ValueError(f"{DEMO_POLICY}: trained for {policy.env_id} {policy.env_kwargs}, "
                          f"the demo runs {DEMO_ENV}")
     trained = DYNAMICS_LABELS.get(policy.config.dynamics, policy.config.dynamics)
+    if policy.env_id != DEMO_ENV:
+        trained += f" {policy.env_id.split('/')[-1]}"
     labels = {name: f"plans on {DYNAMICS_LABELS[name]}" for name in models}
     labels["ppo"] = f"PPO (trained on {trained})"
     agents = {name: (lambda env, dyn=dyn: make_planner("cem", dyn, "push", env=env, **budget))
               for name, dyn in models.items()}
     agents["ppo"] = lambda env: PolicyAgent(policy)
     size = 96 if quick else 320
-    print(f"\n=== Push-v1: CEM planning on the shipped FIGNet push model vs on MuJoCo, and the shipped "
+    print(f"\n=== Push-v2: CEM planning on the shipped FIGNet push model vs on MuJoCo, and the shipped "
           f"PPO policy {DEMO_POLICY!r} (trained on {trained}), all acting in MuJoCo "
           f"({episodes} seeded episodes) ===")
     rows: dict[str, list[dict[str, Any]]] = {k: [] for k in agents}
@@ -176,7 +179,7 @@ def _plot_mpc(curves: dict[str, list[list[float]]], labels: dict[str, str], path
             ax.plot(t, np.array(c) * 1000, color=colour, alpha=0.8,
                     label=labels[name] if i == 0 else None)
     ax.axhline(10.0, color="grey", ls="--", lw=1, label="success (1 cm)")
-    ax.set(xlabel="time (s)", ylabel="object to goal (mm)", title="Push-v1, acting in MuJoCo")
+    ax.set(xlabel="time (s)", ylabel="object to goal (mm)", title="Push-v2, acting in MuJoCo")
     ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -189,7 +192,7 @@ def run_demo(
     """Run the demo and write its outputs to ``out``; returns the summary.
 
     Args:
-        out: output folder. quick: a tiny budget (tests). episodes: seeded Push-v1 episodes per
+        out: output folder. quick: a tiny budget (tests). episodes: seeded Push-v2 episodes per
             agent (two planners, one PPO policy). rollouts: also compare open-loop rollouts with MuJoCo.
     """
     outdir = Path(out)

@@ -1,6 +1,6 @@
 """``fignet-gym plan``: seeded episodes of a planner (or a baseline) acting in an environment.
 
-    fignet-gym plan --env fignet_gym/Push-v1 --dynamics fignet --planner cem --episodes 50 \\
+    fignet-gym plan --env fignet_gym/Push-v2 --dynamics fignet --planner cem --episodes 50 \\
         --seed 0 --out runs/plan-fignet --videos 2
 
 The planner plans with ``--dynamics`` (MuJoCo, or the shipped/given FIGNet model) and acts in the
@@ -44,7 +44,7 @@ class PlanError(ValueError):
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The ``plan`` sub-command's arguments."""
-    p.add_argument("--env", default="fignet_gym/Push-v1", help="environment id")
+    p.add_argument("--env", default="fignet_gym/Push-v2", help="environment id")
     p.add_argument("--dynamics", default="mujoco", choices=["mujoco", "fignet"],
                    help="the planner's model")
     p.add_argument("--checkpoint", help="fignet: checkpoint path or pretrained name (default: "
