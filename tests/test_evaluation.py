@@ -313,3 +313,25 @@ def test_paired_ratios_of_recordings_shorter_than_the_horizon() -> None:
     ratios = paired_ratios(res, res)
     assert ratios["translation_rmse"] == pytest.approx([1.0, 1.0, 1.0])
     assert ratios["translation_rmse_last"] == pytest.approx([1.0, 1.0, 1.0])
+
+
+def test_yaw_change_is_the_signed_turn_about_the_vertical() -> None:
+    import math
+
+    import torch
+    from scipy.spatial.transform import Rotation
+
+    from fignet_gym.train.metrics import yaw_change, yaw_fit
+
+    def pose(yaw: float, tilt: float = 0.0, flip: bool = False) -> list[float]:
+        q = (Rotation.from_euler("z", yaw) * Rotation.from_euler("x", tilt)).as_quat(scalar_first=True)
+        return [0.0, 0.0, 0.0, *(-q if flip else q)]
+
+    start = torch.tensor([pose(0.3), pose(3.0), pose(-1.0, 0.2)], dtype=torch.float32)
+    end = torch.tensor([pose(0.8, flip=True), pose(-3.0), pose(-1.4, 0.2)], dtype=torch.float32)
+    # +0.5; across the +-pi seam the short way (+0.283); a tilted object turned by -0.4 about z.
+    want = torch.tensor([0.5, 2 * math.pi - 6.0, -0.4])
+    assert torch.allclose(yaw_change(start, end), want, atol=1e-6)
+    true = [0.1, -0.2, 0.3, 0.05]
+    assert yaw_fit(true, true) == pytest.approx((1.0, 1.0))
+    assert yaw_fit([0.5 * t + 0.01 for t in true], true)[0] == pytest.approx(0.5)

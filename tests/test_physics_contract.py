@@ -172,7 +172,7 @@ def test_shipped_push_step_is_exactly_equivariant_about_the_vertical(push_model_
     wrong_way[..., 3:] = turned(poses[t - 2:t + 2], rot.inv())[..., 3:]
     good = turned(sim.step(scene, poses[t - 2:t + 1], poses[t + 1]), rot)
     bad = sim.step(scene, wrong_way[:3], wrong_way[3])
-    assert float((bad - good)[scene.dynamic_mask, :3].abs().max()) > 1e-3
+    assert float((bad - good)[scene.dynamic_mask, :3].abs().max()) > 10 * max(worst, 1e-6)
 
 
 def toss_history(xml_objects: int = 3, seed: int = 0) -> tuple[Scene, torch.Tensor]:

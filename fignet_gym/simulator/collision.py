@@ -25,10 +25,9 @@ import torch
 from torch import Tensor
 
 
-#: Closest-point candidates whose squared distance is within this fraction of the smallest one
-#: (and :data:`TIE_D2_ABS` m^2) are ties (distances within 5e-5 relative, 1e-7 m).
-TIE_D2 = 1e-4
-TIE_D2_ABS = 1e-14
+#: Closest-point candidates whose distances differ by less than this many times the rounding of
+#: their coordinates (``eps`` times the largest) are ties.
+TIE_ROUNDING = 2
 
 
 @dataclass(frozen=True)
@@ -184,12 +183,13 @@ def _closest_points(tri_a: Tensor, tri_b: Tensor) -> tuple[Tensor, Tensor, Tenso
     ee_d2 = gap.square_().sum(0).reshape(9, num)
 
     # Best candidate, then rebuild its two points from the table. Parallel faces tie many
-    # candidates; the first in table order (piercing first) within TIE_D2 of the minimum wins, so
-    # which one is taken depends on the triangles, not on rounding (which a turned or shifted
-    # scene changes).
+    # candidates; the first in table order (piercing first) within rounding of the minimum wins
+    # (a squared distance d^2 from coordinates of size c rounds by about 2 d c eps), so which one
+    # is taken depends on the triangles, not on rounding (which a turned or shifted scene changes).
     all_d2 = torch.cat((pi_d2.reshape(6, num), vf_d2.reshape(6, num), ee_d2))
     low = all_d2.min(0).values
-    best = (all_d2 <= low * (1 + TIE_D2) + TIE_D2_ABS).to(torch.uint8).argmax(0)
+    scale = tris.abs().amax(dim=(0, 1, 2)) * (TIE_ROUNDING * finfo.eps)
+    best = (all_d2 <= low + 2 * scale * low.sqrt() + scale.square()).to(torch.uint8).argmax(0)
     zero3 = height.new_zeros(3, num)
     frac, lift = frac.reshape(6, num), lift.reshape(6, num)
     coef_a = torch.cat((frac, lift[:3], zero3, s.reshape(9, num)))  # [21, P]

@@ -31,6 +31,8 @@ from fignet_gym.train.metrics import (
     predictor_metrics,
     rotation_gain,
     score_rollouts,
+    yaw_change,
+    yaw_fit,
 )
 from fignet_gym.train.one_step import one_step_errors
 from fignet_gym.train.report import plot_curves, print_table, write_comparison_video
@@ -85,6 +87,12 @@ def rollout_metrics(sim: LearnedSimulator, trajs: list[Trajectory], scenes: list
                            trues[i][horizon]) for i in reach]
     gains = [x for x in gains if math.isfinite(x)]
     out["rotation_gain"] = float(np.median(gains)) if gains else math.nan
+    yaw_p, yaw_t = [], []
+    for i in reach:
+        dyn = scenes[i].dynamic_mask
+        yaw_t += yaw_change(trues[i][H - 1], trues[i][horizon])[dyn].tolist()
+        yaw_p += yaw_change(trues[i][H - 1], preds[i][horizon])[dyn].tolist()
+    out["yaw_slope"], out["yaw_correlation"] = yaw_fit(yaw_p, yaw_t)
     out.update(penetration_summary(scenes, preds, trues, H))
     return out
 

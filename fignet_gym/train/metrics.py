@@ -89,6 +89,23 @@ def rotation_gain(dynamic: Tensor, start: Tensor, pred: Tensor, true: Tensor, mi
     return float((turn_p[keep] / turn_t[keep]).median())
 
 
+def yaw_change(start: Tensor, end: Tensor) -> Tensor:
+    """Signed turn (rad) about the world vertical from ``start`` to ``end`` poses ``float[O, 7]``:
+    ``float[O]`` in (-pi, pi], the twist about z of the relative rotation."""
+    rel = quat_normalize(quat_mul(end[:, 3:], quat_conj(start[:, 3:])))  # w >= 0
+    return 2 * torch.atan2(rel[:, 3], rel[:, 0])
+
+
+def yaw_fit(pred: list[float], true: list[float]) -> tuple[float, float]:
+    """``(slope, correlation)`` of predicted on true yaw changes (least squares with an
+    intercept): 1 and 1 for a model that turns every object as much as the data does."""
+    if len(true) < 3 or float(np.std(true)) == 0.0:
+        return math.nan, math.nan
+    p, t = np.asarray(pred), np.asarray(true)
+    slope = float(np.polyfit(t, p, 1)[0])
+    return slope, float(np.corrcoef(t, p)[0, 1])
+
+
 def floor_penetration(scene: Scene, poses: Tensor) -> Tensor:
     """Mean depth (m) of dynamic nodes below ``z = 0`` per step: ``float[T, O, 7] -> float[T]``."""
     z = scene.node_positions(poses)[..., 2][:, scene.dynamic_mask[scene.node_object]]

@@ -79,6 +79,9 @@ def print_table(res: dict[str, Any], label: str = "FIGNet") -> None:
         print(f"rotation gain (predicted / true turn of objects turning > 1 deg, median) "
               f"{res['rotation_gain']:.2f}; one-step spin gain (teacher-forced) "
               f"{res['one_step_spin_gain']:.2f}")
+    if math.isfinite(res.get("yaw_slope", math.nan)):
+        print(f"yaw about the vertical since the last given pose, predicted on true over every "
+              f"object: slope {res['yaw_slope']:.2f}, correlation {res['yaw_correlation']:.2f}")
     if "one_step_free_flight" in res:
         if math.isfinite(res["one_step_free_flight"]):
             print(f"one-step free-flight acceleration error (RMS / |a| dt^2, {res['free_flight_steps']} "
