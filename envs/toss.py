@@ -1,4 +1,5 @@
-"""``fignet_gym/Toss-v1`` (and the deprecated ``Toss-v0``): toss objects one by one onto a target region of the floor."""
+"""``fignet_gym/Toss-v1`` (and the deprecated ``Toss-v0``): toss objects one by one onto a target
+region of the floor."""
 
 from __future__ import annotations
 

@@ -1,12 +1,15 @@
 """How much data does a push's yaw need? A learning curve of a model-free regressor.
 
 A gradient-boosted tree regressor is given each push's exact generator parameters (object shape,
-floor and tip friction, speed, approach angle, side and position of the contact), which decide
-MuJoCo's trajectory completely, and predicts the object's yaw after 0.5 s. Its held-out R^2
-against the number of training pushes says how hard that map is to learn from examples,
-independently of any graph network: if even this regressor needs many thousands of pushes, a
-learned simulator trained on 2000 will turn objects too little (it regresses to the mean).
-The last column is in the push target's unit: the median yaw error over that of not moving.
+floor and tip friction, speed, approach angle, side and position of the contact) and predicts the
+object's yaw after 0.5 s. Under isotropic friction (the elliptic cone of ``generate`` since issue
+38) those parameters decide MuJoCo's trajectory in the object's frame completely; under MuJoCo's
+default pyramidal cone (``generate --cone pyramidal``, the data of Push-v0/v1) the world heading
+``object_yaw0`` changes the turn too (one push: -1.9 to -12.4 deg over 12 headings), so the yaw
+is not a function of these parameters and no learner can fit it. Its held-out R^2 against the
+number of training pushes says how hard the map is to learn from examples, independently of any
+graph network. The last column is in the push target's unit: the median yaw error over that of
+not moving (measured figures for both cones: docs/experiments.md, "Isotropic physics").
 
     pip install scikit-learn   # not a fignet_gym dependency
     python examples/push_yaw_learnability.py --train data/push_train.h5 data/push_train8k.h5 \\

@@ -168,11 +168,13 @@ def test_shipped_push_ppo_under_sb3_evaluate_policy_scores_as_its_own_evaluation
     assert len(set(np.round(returns, 6))) == n  # distinct episodes: the seeds did reach the envs
     # ... and the shipped final_eval.json, written by the training process, says the same on the
     # learned model. (Its MuJoCo returns move with MuJoCo's patch version: 4.0.0 and 4.0.1 differ
-    # by up to 10 in a 75-step push; the learned step does not depend on MuJoCo's solver.)
+    # by up to 10 in a 75-step push.) Not to the bit: issue 38 changed how the learned step breaks
+    # closest-point and span-order ties, which moves these 75-step returns by up to 0.3% (and by
+    # as much between two CPUs); the policy and successes must stay the training run's.
     final = json.loads((shipped.policies_dir() / "push-ppo" / "final_eval.json").read_text())
     learned = evaluate_policy_on("fignet", policy, n_episodes=n, seed=EVAL_SEED)
     shipped_eval = final["eval"]["fignet"]
-    assert learned["episode_returns"] == pytest.approx(shipped_eval["episode_returns"][:n], rel=1e-5)
+    assert learned["episode_returns"] == pytest.approx(shipped_eval["episode_returns"][:n], rel=1e-2)
     assert learned["episode_successes"] == shipped_eval["episode_successes"][:n]
 
 

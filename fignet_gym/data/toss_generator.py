@@ -11,7 +11,15 @@ import numpy as np
 from fignet_gym.data.format import Trajectory
 from fignet_gym.data.generator_base import GENERATED_SOURCE, GENERATOR_VERSION, GenerationError, num_poses
 from fignet_gym.data.push_generator import PoseHook
-from fignet_gym.mjcf import DEFAULT_CONE, MATERIALS, SIMPLE_SHAPES, TOSS_SHAPES, TossObject, toss_scene_xml, unit_shape_mesh
+from fignet_gym.mjcf import (
+    DEFAULT_CONE,
+    MATERIALS,
+    SIMPLE_SHAPES,
+    TOSS_SHAPES,
+    TossObject,
+    toss_scene_xml,
+    unit_shape_mesh,
+)
 from fignet_gym.simulator.scene import MeshOptions, Scene
 
 #: Lowest point (m) of a placed object above the floor at the start.

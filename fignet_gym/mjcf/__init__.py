@@ -59,7 +59,8 @@ from fignet_gym.mjcf.toss import (
 from fignet_gym.simulator.scene import MeshOptions, restitution_to_dampratio
 
 __all__ = [
-    "COMPLEX_SHAPES", "CONES", "CONTACT_TIMECONST", "DEFAULT_CONE", "ELLIPSE_SIDES", "FLOOR_FRICTION", "FLOOR_RESTITUTION",
+    "COMPLEX_SHAPES", "CONES", "CONTACT_TIMECONST", "DEFAULT_CONE", "ELLIPSE_SIDES", "FLOOR_FRICTION",
+    "FLOOR_RESTITUTION",
     "MATERIALS", "MIT_OBJECTS", "MIT_THICKNESS", "ROLLING_FRICTION", "SIMPLE_SHAPES", "TORSIONAL_FRICTION",
     "TOSS_SHAPES", "MeshOptions",
     "PushObject", "TossObject", "cube_scene_xml", "ellipse_outline", "prism_mesh", "push_object",

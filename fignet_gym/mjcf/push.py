@@ -192,8 +192,8 @@ def push_scene_text(
 ) -> str:
     """MJCF text of a pushing scene: floor, a free ``object`` body holding ``geoms`` (MJCF text of
     its geoms over the ``meshes`` assets), with ``com float[3]`` and ``inertia float[6]``
-    (full inertia), and the mocap ``tip`` cylinder, under friction ``cone``. Shared by :func:`push_scene_xml` and the
-    real-outline scenes of :mod:`fignet_gym.data.mit_scene`."""
+    (full inertia), and the mocap ``tip`` cylinder, under friction ``cone``. Shared by
+    :func:`push_scene_xml` and the real-outline scenes of :mod:`fignet_gym.data.mit_scene`."""
     x, y, yaw = (float(v) for v in object_pose)
     solref = f'{contact_timeconst} 1'
     return f"""<mujoco model="{name}">

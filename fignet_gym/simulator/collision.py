@@ -24,7 +24,6 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-
 #: Closest-point candidates whose distances differ by less than this many times the rounding of
 #: their coordinates (``eps`` times the largest) are ties.
 TIE_ROUNDING = 2

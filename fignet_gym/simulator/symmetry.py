@@ -50,10 +50,11 @@ class CanonicalFrame:
     sin: Tensor
 
 
-def _static_info(scene: Scene) -> tuple[Tensor, Tensor, Tensor]:
-    """``(reference int64[S], plane bool[O], anchor float[O, 3])``: each scene's reference object,
-    the floors, and the centroid of each floor's first triangle in its body frame (else 0)."""
-    def build() -> tuple[Tensor, Tensor, Tensor]:
+def _static_info(scene: Scene) -> tuple[Tensor, Tensor, Tensor, bool]:
+    """``(reference int64[S], plane bool[O], anchor float[O, 3], any plane)``: each scene's
+    reference object, the floors, the centroid of each floor's first triangle in its body frame
+    (else 0), and whether the batch has a floor at all. Built once per scene on its host tensors."""
+    def build() -> tuple[Tensor, Tensor, Tensor, bool]:
         o = scene.num_objects
         z = scene.ref_vertices[:, 2]
         big = torch.finfo(z.dtype).max
@@ -65,7 +66,7 @@ def _static_info(scene: Scene) -> tuple[Tensor, Tensor, Tensor]:
         # Lowest score first: dynamic objects, then the other non-floors, in object order.
         idx = torch.arange(o)
         score = idx + o * (scene.object_kind != ObjectKind.DYNAMIC).long() + 2 * o * plane.long()
-        s = int(scene.object_scene.max()) + 1 if o else 0
+        s = scene.num_scenes
         ref = torch.full((s,), 3 * o, dtype=torch.long).scatter_reduce(
             0, scene.object_scene, score, "amin") % o
         nf = scene.faces.shape[0]
@@ -74,7 +75,8 @@ def _static_info(scene: Scene) -> tuple[Tensor, Tensor, Tensor]:
         anchor = torch.zeros(o, 3, dtype=scene.ref_vertices.dtype)
         rows = (plane & (first < nf)).nonzero().squeeze(1)
         anchor[rows] = scene.ref_vertices[scene.faces[first[rows]]].mean(1)
-        return ref, plane, anchor
+        # A Python bool, once per scene: a tensor test per step would sync a GPU with the host.
+        return ref, plane, anchor, bool(plane.any())
     return scene.cached("canonical_static", build)
 
 
@@ -82,7 +84,7 @@ def canonical_frame(scene: Scene, poses: Tensor) -> CanonicalFrame:
     """The frame of each scene from its current poses ``float[O, 7]`` (``[x, y, z, qw, qx, qy,
     qz]``). Turning the scene by ``a`` about the vertical turns every frame by ``a``; shifting it
     horizontally shifts every origin: so :func:`to_frame` gives the same poses for both."""
-    ref, _, _ = _static_info(scene)
+    ref, _, _, _ = _static_info(scene)
     pose = poses.index_select(0, ref.to(poses.device))
     axes = quat_to_matrix(pose[:, 3:]).transpose(-1, -2)[..., :2]  # [S, axis, xy]
     long_enough = axes.norm(dim=-1) >= MIN_HORIZONTAL  # [S, 3]
@@ -94,7 +96,7 @@ def canonical_frame(scene: Scene, poses: Tensor) -> CanonicalFrame:
 
 
 def _apply(scene: Scene, poses: Tensor, frame: CanonicalFrame, inverse: bool) -> Tensor:
-    _, plane, anchor = _static_info(scene)
+    _, plane, anchor, any_plane = _static_info(scene)
     sc = scene.object_scene.to(poses.device)
     c, s = frame.cos.index_select(0, sc), frame.sin.index_select(0, sc)  # [O]
     if not inverse:
@@ -112,7 +114,7 @@ def _apply(scene: Scene, poses: Tensor, frame: CanonicalFrame, inverse: bool) ->
     qz = torch.stack((half.cos(), zero, zero, half.sin()), dim=-1).expand_as(poses[..., 3:])
     quat = quat_mul(qz, poses[..., 3:])
     out = torch.cat((pos, quat), dim=-1)
-    if not bool(plane.any()):
+    if not any_plane:
         return out
     # Level floors: their world yaw and position say nothing (the plane is the same set), so in
     # the frame they are upright with the first triangle's centroid under the origin. Inverse:

@@ -405,7 +405,9 @@ def planning_agent(env_id: str, env: Any, planner: str, dynamics: str, act_dynam
             raise ValueError("--checkpoint only applies to --dynamics fignet")
         dyn = MujocoDynamics(nthread=threads)
     else:
-        dyn = make_dynamics("fignet", checkpoint, scene)
+        # The env version's own model by default (Push-v1: push-pyramidal, Push-v2: push).
+        default = getattr(env.unwrapped, "default_checkpoint", "") or None
+        dyn = make_dynamics("fignet", checkpoint or default, scene)
     # An env whose scene depends on its dynamics (CubeToss: fitted MuJoCo parameters, the
     # learned model's own nominal scene) plans on the planning dynamics' scene.
     plan_model = None

@@ -135,6 +135,29 @@ class _Objective(nn.Module):
         return self._loss(scene, poses)
 
 
+def _still_ratio(rec: dict[str, float], q: str, at: str) -> float:
+    """``rec``'s ratio of ``q`` at ``at`` ("final" or "last") to the no-motion model's. Where
+    nothing moved in ``q`` (the no-motion error is exactly zero, e.g. no validation window turns
+    yet) the ratio has no scale and counts 0; a missing or non-finite model error counts inf."""
+    suffix = "" if at == "final" else "_last"
+    ratio = rec.get(f"{q}{suffix}_ratio_still", math.nan)
+    if math.isfinite(ratio):
+        return ratio
+    if rec.get(f"still_{q}_{at}") == 0 and math.isfinite(rec.get(f"{q}_{at}", math.nan)):
+        return 0.0
+    return math.inf
+
+
+def selection_score(rec: dict[str, float], last_weight: float) -> float:
+    """The validation score ``best.pt`` minimises: translation plus rotation error, each in units
+    of the no-motion model's, at the rollout's end, plus ``last_weight`` times the same at its
+    last frame; inf when any term is undefined."""
+    key = sum(_still_ratio(rec, q, "final") for q in ("translation_rmse", "rotation_deg"))
+    if last_weight > 0:
+        key += last_weight * sum(_still_ratio(rec, q, "last") for q in ("translation_rmse", "rotation_deg"))
+    return key if math.isfinite(key) else math.inf
+
+
 class Trainer:
     """Trains a :class:`LearnedSimulator` on trajectory files; see the module docstring."""
 
@@ -412,16 +435,7 @@ class Trainer:
         st = self.state
         rec = {"step": st.step, "graphs_seen": st.graphs_seen, "cpu_hours": st.cpu_seconds / 3600,
                **{k: float(v) for k, v in m.items() if isinstance(v, (int, float))}}
-        # Translation and rotation both count, each in units of the no-motion model's error.
-        key = rec.get("translation_rmse_ratio_still", math.inf) + rec.get("rotation_deg_ratio_still",
-                                                                          math.inf)
-        if self.cfg.valid_last_weight > 0:
-            key += self.cfg.valid_last_weight * (
-                rec.get("translation_rmse_last_ratio_still", math.inf)
-                + rec.get("rotation_deg_last_ratio_still", math.inf))
-        if not math.isfinite(key):
-            key = math.inf
-        rec["score"] = key
+        rec["score"] = key = selection_score(rec, self.cfg.valid_last_weight)
         st.history.append(rec)
         with open(self.out / "curve.jsonl", "a") as fh:
             fh.write(json.dumps(rec) + "\n")
