@@ -345,3 +345,47 @@ def test_a_window_shorter_than_a_step_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="at least one step"):
         import_mit([SAMPLE], tmp_path / "x.h5", protocol=MitProtocol(window=0.005))
     assert not (tmp_path / "x.h5").exists()
+
+
+def _square_contacts(shift: np.ndarray, turn_deg: float) -> list[np.ndarray]:
+    """Tip centres ``TIP_RADIUS`` outside each side of rect1 (40 per side, one push per side),
+    expressed in a recorded frame turned by ``turn_deg`` and shifted by ``shift`` (m) from the
+    outline's: ``outline = R(turn) q + shift``."""
+    poly, rng = geo.outline("rect1"), np.random.default_rng(0)
+    pushes = []
+    for a, b in zip(poly, np.roll(poly, -1, axis=0)):
+        edge = b - a
+        normal = np.array([edge[1], -edge[0]]) / np.linalg.norm(edge)
+        normal *= np.sign(np.dot(normal, (a + b) / 2 - poly.mean(0)))
+        p = a + rng.uniform(0.2, 0.8, (40, 1)) * edge + geo.TIP_RADIUS * normal
+        pushes.append((p - shift) @ geo.rotation(math.radians(turn_deg)))
+    return pushes
+
+
+@pytest.mark.parametrize("theta0", [0.0, 4.16e-16, 1e-12, 2 * math.pi - 4e-16])
+def test_shift_refit_at_a_fixed_rotation_leaves_its_start(theta0: float) -> None:
+    """A user's surface: a quarter-turn rounding left theta0 = 4.16e-16 instead of 0, and the
+    shift-only refit, with the rotation boxed to theta0 +- 1e-9, never moved from (0, 0)."""
+    shift = np.array([0.0006, -0.0004])
+    pts = np.concatenate(_square_contacts(shift, 0.0))
+    theta, found, _ = geo._refine(pts, np.ones(len(pts)), geo.outline("rect1"), theta0, False)
+    assert theta == pytest.approx(theta0 % (2 * math.pi))
+    np.testing.assert_allclose(found, shift, atol=2e-5)
+
+
+@pytest.mark.parametrize("turn", [-1.0, 0.5, 2.0, 89.0])
+def test_square_frame_turned_by_a_small_angle_gives_the_quarter_turn_and_the_shift(turn: float) -> None:
+    """Recorded frame turned by ``turn`` (within QUARTER_TURN_DEG of a quarter turn) and shifted
+    by (0.6, -0.4) mm: the rotation rounds to the quarter turn and the shift is the turned shift
+    to 0.25 mm (the residual turn of up to 2 deg moves the contacts by about that)."""
+    shift = np.array([0.0006, -0.0004])
+    off = geo.estimate_offset(geo.outline("rect1"), _square_contacts(shift, turn))
+    assert off.status == "quarter"
+    degrees = math.degrees(off.theta) % 90
+    assert min(degrees, 90 - degrees) < 1e-9
+    # the square is symmetric under quarter turns: the shift is the true one turned to the
+    # quarter turn the fit picked
+    k = round(math.degrees(off.theta) / 90)
+    quarter = math.radians(90 * k - round(turn / 90) * 90)
+    expected = geo.rotation(quarter) @ shift
+    assert np.linalg.norm(np.asarray(off.shift) - expected) < 2.5e-4

@@ -253,23 +253,30 @@ def _thin(points: np.ndarray) -> np.ndarray:
 def _refine(pts: np.ndarray, w: np.ndarray, poly: np.ndarray, theta0: float,
             free_theta: bool) -> tuple[float, np.ndarray, float]:
     """Robust fit of the shift (and the rotation, near ``theta0``, if ``free_theta``): rotation,
-    shift ``float[2]`` and the final cost."""
+    shift ``float[2]`` and the final cost.
+
+    A fixed rotation is left out of the unknowns rather than boxed in: the bounded solver keeps
+    every step strictly inside all bounds at once, so a rotation pinned to ``theta0 +- 1e-9`` near
+    a bound (``theta0`` = 4e-16 after rounding) stopped the shift at its start."""
     from scipy.optimize import least_squares
 
     sw = np.sqrt(w)  # each push's squared residuals weigh as one residual
     prior = RESIDUAL_SCALE / SHIFT_PRIOR  # a shift of SHIFT_PRIOR costs one push's worth
 
     def residuals(x: np.ndarray) -> np.ndarray:
-        theta = x[0] if free_theta else theta0
-        d = signed_distance(pts @ rotation(theta).T + x[1:], poly) - TIP_RADIUS
-        return np.concatenate([sw * _lopsided(d), prior * x[1:]])
+        theta, shift = (x[0], x[1:]) if free_theta else (theta0, x)
+        d = signed_distance(pts @ rotation(theta).T + shift, poly) - TIP_RADIUS
+        return np.concatenate([sw * _lopsided(d), prior * shift])
 
-    step = math.radians(OFFSET_GRID_DEG) * 3 if free_theta else 1e-9
-    fit = least_squares(residuals, [theta0, 0.0, 0.0], loss="soft_l1", f_scale=RESIDUAL_SCALE,
-                        bounds=([theta0 - step, -MAX_OFFSET_SHIFT, -MAX_OFFSET_SHIFT],
-                                [theta0 + step, MAX_OFFSET_SHIFT, MAX_OFFSET_SHIFT]))
-    theta = float(fit.x[0]) if free_theta else theta0
-    return theta % (2 * math.pi), fit.x[1:].copy(), float(fit.cost)
+    lo, hi = [-MAX_OFFSET_SHIFT] * 2, [MAX_OFFSET_SHIFT] * 2
+    if free_theta:
+        step = math.radians(OFFSET_GRID_DEG) * 3
+        x0, lo, hi = [theta0, 0.0, 0.0], [theta0 - step, *lo], [theta0 + step, *hi]
+    else:
+        x0 = [0.0, 0.0]
+    fit = least_squares(residuals, x0, loss="soft_l1", f_scale=RESIDUAL_SCALE, bounds=(lo, hi))
+    theta, shift = (float(fit.x[0]), fit.x[1:]) if free_theta else (theta0, fit.x)
+    return theta % (2 * math.pi), shift.copy(), float(fit.cost)
 
 
 def estimate_offset(poly: np.ndarray, contacts: Sequence[np.ndarray]) -> FrameOffset:
