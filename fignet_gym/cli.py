@@ -217,11 +217,13 @@ def build_parser() -> argparse.ArgumentParser:
     e = sub.add_parser("evaluate", help="rollout metrics, plots and videos of a checkpoint")
     e.add_argument("--checkpoint", required=True, help="checkpoint file or pretrained name")
     e.add_argument("--data", required=True, help="held-out trajectories (HDF5)")
-    e.add_argument("--out", default="outputs/eval", help="folder for metrics.json, plots, videos")
+    e.add_argument("--out", default="outputs/eval",
+                   help="folder for metrics.json, plots, videos (default: outputs/eval)")
     e.add_argument("--num", type=int_at_least(1), default=None, help="first N trajectories (default: all)")
-    e.add_argument("--horizon", type=int_at_least(1), default=50,
+    e.add_argument("--horizon", type=int_at_least(1), default=None,
                    help="frame of the headline errors, counted from frame 0 of each trajectory "
-                   "(each trajectory's last frame is scored too)")
+                   "(default: 50, or the longest trajectory's last frame if shorter; each "
+                   "trajectory's last frame is scored too)")
     e.add_argument("--videos", type=int_at_least(0), default=2, help="side-by-side videos to write")
     e.add_argument("--against", help="second checkpoint (e.g. a baseline), or a fitted MuJoCo "
                    "(mujoco:cube-real, or a parameters .json), on the same trajectories: ratio of "

@@ -335,3 +335,30 @@ def test_yaw_change_is_the_signed_turn_about_the_vertical() -> None:
     true = [0.1, -0.2, 0.3, 0.05]
     assert yaw_fit(true, true) == pytest.approx((1.0, 1.0))
     assert yaw_fit([0.5 * t + 0.01 for t in true], true)[0] == pytest.approx(0.5)
+
+
+def test_evaluate_horizon_defaults_to_what_the_data_reaches_and_refuses_before_rolling_out(
+        pushes: list, tmp_path, monkeypatch, capsys) -> None:
+    """26-pose windows (0.5 s of a real push at 0.02 s): the default horizon is their last frame,
+    25, not 50; an explicit horizon past every trajectory is refused in one line before any
+    rollout runs."""
+    data, ckpt = tmp_path / "short.h5", tmp_path / "m.pt"
+    write_trajectories(data, [replace(t, poses=t.poses[:26]) for t in pushes])
+    save(zero_simulator("push"), ckpt)
+    assert evaluate(str(ckpt), str(data), str(tmp_path / "a"), videos=0)["horizon_step"] == 25
+    import fignet_gym.train.evaluation as evaluation
+
+    def no_rollouts(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        raise AssertionError("a rollout ran before the horizon was checked")
+
+    monkeypatch.setattr(evaluation, "rollout_metrics", no_rollouts)
+    assert main(["evaluate", "--checkpoint", str(ckpt), "--data", str(data), "--out",
+                 str(tmp_path / "b"), "--videos", "0", "--horizon", "50"]) == 2
+    assert "no trajectory reaches frame 50 (the longest has 26 poses): pass --horizon 25" in \
+        capsys.readouterr().err
+
+
+def test_dt_refusal_of_mit_data_names_the_import_flag(pushes: list) -> None:
+    mit = [replace(t, metadata={**t.metadata, "source": "mit_pushing/h5"}) for t in pushes]
+    with pytest.raises(ValueError, match=r"re-import with `fignet-gym import-mit \.\.\. --dt 0\.01`"):
+        rollout_metrics(zero_simulator("push", dt=0.01), mit, horizon=10)

@@ -353,7 +353,7 @@ def _square_contacts(shift: np.ndarray, turn_deg: float) -> list[np.ndarray]:
     outline's: ``outline = R(turn) q + shift``."""
     poly, rng = geo.outline("rect1"), np.random.default_rng(0)
     pushes = []
-    for a, b in zip(poly, np.roll(poly, -1, axis=0)):
+    for a, b in zip(poly, np.roll(poly, -1, axis=0), strict=True):
         edge = b - a
         normal = np.array([edge[1], -edge[0]]) / np.linalg.norm(edge)
         normal *= np.sign(np.dot(normal, (a + b) / 2 - poly.mean(0)))

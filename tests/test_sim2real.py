@@ -429,3 +429,23 @@ def test_tracking_noise_recovers_known_noise_and_zero_noise_has_no_floor() -> No
                         {"position_m": 0.0, "rotation_deg": 0.0, "planar": True}, horizon=10,
                         samples=1)
     assert floor["translation_rmse_final"] < 1e-8 and floor["rotation_deg_final"] < 1e-5
+
+
+def test_sim2real_refuses_before_writing_and_a_corrected_rerun_needs_no_resume(tmp_path: Path) -> None:
+    """A size larger than the training split, and a fine-tune of a 0.02 s model on 0.012 s
+    pushes, are refused in one line with nothing written, so the corrected command runs as is."""
+    from fignet_gym.train.sim2real import Sim2RealError, run_sim2real
+
+    raw, out = tmp_path / "raw", tmp_path / "s2r"
+    assert main(["mit-standin", "--out", str(raw), "--num", "10", "--seed", "0"]) == 0
+    fast, data = tmp_path / "fast.h5", tmp_path / "standin.h5"
+    assert main(["import-mit", str(raw), "--out", str(fast), "--dt", "0.012"]) == 0
+    assert main(["import-mit", str(raw), "--out", str(data)]) == 0  # default: the models' 0.02 s
+    assert load_trajectories(data)[0].dt == pytest.approx(0.02)
+    common = ["--out", str(out), "--horizon", "10", "--config", "push-finetune", "--init", "push",
+              "--budget", "2", "--fit-evaluations", "3", "--fit-trajectories", "2", "--no-polish"]
+    with pytest.raises(Sim2RealError, match=r"poses every 0.012 s, but --init push steps 0.02 s .*--dt 0.02"):
+        run_sim2real(fast, out, sizes=(2,), horizon=10, config="push-finetune", init="push", budget=2)
+    assert not out.exists()
+    assert main(["sim2real", "--data", str(data), "--sizes", "500", *common]) == 2
+    assert not out.exists()  # so the corrected command (the end-to-end test above) runs as is

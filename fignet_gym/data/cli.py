@@ -313,13 +313,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     m = subparsers.add_parser(
         "import-mit", help="import MIT Pushing raw or pdproc files (windows from first contact)",
         description="Import MIT Pushing pushes: the real outlines with each shape's frame offset "
-        "measured on the pushes given, 0.5 s windows from first contact every 12 ms (the "
-        "FIGNet paper's protocol, docs/sim2real.md); prints the per-shape contact check.")
+        "measured on the pushes given, 0.5 s windows from first contact every 20 ms (the "
+        "FIGNet paper's protocol at the shipped models' step, docs/sim2real.md); prints the "
+        "per-shape contact check.")
     m.add_argument("paths", nargs="+", help="files or directories (searched recursively)")
     m.add_argument("--out", required=True)
     _mit_selection_args(m)
-    m.add_argument("--dt", type=positive_float, default=0.012,
-                   help="pose step (s; default 0.012: every 3rd sample of the 250 Hz streams)")
+    from fignet_gym.data.mit_files import MODEL_DT
+
+    m.add_argument("--dt", type=positive_float, default=MODEL_DT,
+                   help=f"pose step (s; default {MODEL_DT:g}: the shipped push models' step; 0.012 "
+                   "is the FIGNet paper's, every 3rd sample of the 250 Hz streams)")
     m.add_argument("--duration", type=nonnegative_float, default=0.5,
                    help="window length (s; a long push gives several); 0: one window per push")
     m.add_argument("--start", choices=("contact", "file"), default="contact",

@@ -52,6 +52,7 @@ from fignet_gym.simulator.scene import Scene
 
 #: Paper's step: every 3rd sample of the 250 Hz streams (s).
 PAPER_DT = 0.012
+
 #: Paper's window (s): error after 0.5 s.
 PAPER_WINDOW = 0.5
 #: A window starts at the first sample where the tip's surface is within this (m) of the outline.

@@ -25,6 +25,9 @@ from fignet_gym.mjcf import MIT_OBJECTS
 
 #: Sample rate of the pdproc files (Hz).
 PDPROC_RATE = 180.0
+#: ``import-mit``'s default step (s): that of the shipped push models and ``RealPush-v0``, so that
+#: an imported folder is scored and fine-tuned by them as it is.
+MODEL_DT = 0.02
 
 _MIT_NAME = re.compile(
     r"^(?:motion_surface=(?P<surface>[A-Za-z0-9]+)_shape=(?P<shape>[A-Za-z0-9]+)_)?"

@@ -30,9 +30,11 @@ def check_dt(trajs: list[Trajectory], dt: float) -> None:
     for t in trajs:
         if abs(t.dt - dt) > DT_RTOL * dt:
             where = f"{t.source}: " if t.source else ""
+            fix = (f"re-import with `fignet-gym import-mit ... --dt {dt:g}`"
+                   if str(t.metadata.get("source", "")).startswith("mit_pushing")
+                   else "resample or import the data at the model's dt")
             raise ValueError(f"{where}trajectory {t.name!r}: field 'dt' is {t.dt:.6g} s, the model "
-                             f"steps {dt:.6g} s (resample or import the data at the model's dt, or "
-                             "train a model at the data's dt)")
+                             f"steps {dt:.6g} s ({fix}, or train a model at the data's dt)")
 
 
 def data_scene_type(traj: Trajectory) -> str:

@@ -103,12 +103,15 @@ def is_mujoco_spec(against: str) -> bool:
     return against.startswith(SHIPPED_PREFIX) or against.endswith(".json")
 
 
-def evaluate(checkpoint: str, data: str, out: str, num: int | None = None, horizon: int = HORIZON,
-             videos: int = DEFAULT_VIDEOS, against: str | None = None) -> dict[str, Any]:
+def evaluate(checkpoint: str, data: str, out: str, num: int | None = None,
+             horizon: int | None = None, videos: int = DEFAULT_VIDEOS,
+             against: str | None = None) -> dict[str, Any]:
     """Evaluate a checkpoint on a trajectory file: print a table, write JSON, plots and videos.
 
     ``num``: the first ``num`` trajectories (default: all). ``horizon``: frame of the headline
-    errors, counted from frame 0 of each trajectory; the last frame of each is scored too.
+    errors, counted from frame 0 of each trajectory (default ``HORIZON``, or the last frame of
+    the longest trajectory where that is shorter; a horizon no trajectory reaches is refused
+    before any rollout); the last frame of each is scored too.
 
     ``against``: a second checkpoint rolled out on the same trajectories, or a fitted MuJoCo
     replaying them from the same given poses (``mujoco:<name>``, a shipped fit such as
@@ -116,11 +119,17 @@ def evaluate(checkpoint: str, data: str, out: str, num: int | None = None, horiz
     the ratios of the two models' median errors, with bootstrap intervals, are printed and stored
     under ``"against"``.
     """
-    if (num is not None and num < 1) or horizon < 1 or videos < 0:
+    if (num is not None and num < 1) or (horizon is not None and horizon < 1) or videos < 0:
         raise ValueError(f"evaluate: num and horizon must be >= 1 and videos >= 0, got "
                          f"{num}, {horizon}, {videos}")
     sim = load_pretrained(checkpoint)
     trajs = load_trajectories(data)[:num]
+    longest = max(t.num_steps for t in trajs) - 1  # the last frame any trajectory reaches
+    if horizon is None:
+        horizon = min(HORIZON, longest)
+    elif horizon > longest:
+        raise ValueError(f"{data}: no trajectory reaches frame {horizon} (the longest has "
+                         f"{longest + 1} poses): pass --horizon {longest} or less")
     check_data_matches(sim, trajs, data)
     check_dt(trajs, sim.config.dt)
     other, params = None, None

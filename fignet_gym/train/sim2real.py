@@ -97,6 +97,30 @@ def default_train(config: str = "cube-real", budget: int | None = None,
     return train
 
 
+def _check_sizes(sizes: Sequence[int | None], n_train: int, data: str | os.PathLike) -> None:
+    """Refuse a training-set size larger than the training split (``n_train`` trajectories)."""
+    for s in sizes:
+        if s is not None and s > n_train:
+            raise Sim2RealError(f"{data}: training-set size {s} exceeds the training split's "
+                                f"{n_train} trajectories")
+
+
+def _check_init_dt(data: str | os.PathLike, init: str) -> None:
+    """Refuse to fine-tune ``init`` on data of another step: the model predicts one step of its
+    own ``dt``, and ``evaluate`` would refuse the pairing too."""
+    from fignet_gym.data.format import TrajectoryFile
+    from fignet_gym.pretrained import load_pretrained
+    from fignet_gym.train.data_checks import DT_RTOL
+
+    dt = load_pretrained(init).config.dt
+    with TrajectoryFile(data) as f:
+        data_dt = f[0].dt
+    if abs(data_dt - dt) > DT_RTOL * dt:
+        raise Sim2RealError(f"{data}: poses every {data_dt:g} s, but --init {init} steps {dt:g} s "
+                            f"(re-import with `fignet-gym import-mit ... --dt {dt:g}`, or train "
+                            "from scratch without --init)")
+
+
 def rests_on_floor(trajs: Sequence[Any], clearance: float = FLOOR_CLEARANCE) -> bool:
     """True if in every frame of every trajectory the lowest node of each dynamic object is within
     ``clearance`` (m) of the floor plane ``z = 0``: planar pushes, whose objects never fly.
@@ -243,8 +267,13 @@ def run_sim2real(
     run_cfg["recipe"] = _check_recipe(config_path, (old or {}).get("recipe"), recipe)
     split_dir = out / "split"
     if not (split_dir / "split.json").is_file():
-        check_single_scene_type(data, "--data")  # before anything is written
-        file_split(data, fractions, seed)  # too few recordings: refused here too
+        # Everything that can be refused is refused before anything is written, so a corrected
+        # rerun needs no --resume.
+        check_single_scene_type(data, "--data")
+        planned = file_split(data, fractions, seed)  # too few recordings: refused here too
+        _check_sizes(sizes if fignet else (), len(planned.train), data)
+    if fignet and init is not None and pretrain == 0:
+        _check_init_dt(data, init)
     out.mkdir(parents=True, exist_ok=True)
     _write(config_path, run_cfg)
 
@@ -252,10 +281,7 @@ def run_sim2real(
         write_split(data, split_dir, fractions, seed, force=True)  # no split.json: unfinished
     split = json.loads((split_dir / "split.json").read_text())
     n_train = len(split["train"])
-    for s in sizes if fignet else ():
-        if s is not None and s > n_train:
-            raise Sim2RealError(f"{data}: training-set size {s} exceeds the training split's "
-                                f"{n_train} trajectories")
+    _check_sizes(sizes if fignet else (), n_train, data)
     train = load_trajectories(split_dir / "train.h5")
     valid = load_trajectories(split_dir / "valid.h5")
     test = load_trajectories(split_dir / "test.h5")
