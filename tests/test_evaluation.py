@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 from dataclasses import replace
 from pathlib import Path
 from tempfile import TemporaryDirectory
@@ -267,7 +268,14 @@ def test_evaluate_against_a_fitted_mujoco_file(pushes: list, tmp_path, capsys) -
     assert ag["translation_rmse_final"] < 0.05 * res["still_translation_rmse_final"]
     ratio = ag["ratios"]["translation_rmse"][0]
     assert ratio == pytest.approx(res["translation_rmse_final"] / ag["translation_rmse_final"])
-    assert "fitted MuJoCo replaying the data" in capsys.readouterr().out
+    # No contact parameter in the file: MuJoCo as the data were made, not a fit.
+    assert "(nominal MuJoCo (the data's own MJCF) replaying the data)" in capsys.readouterr().out
+    fitted = tmp_path / "fitted.json"
+    fitted.write_text(json.dumps({"substeps": pushes[0].metadata["substeps"], "friction": 0.3}))
+    evaluate(str(zero), str(data), str(tmp_path / "f"), num=1, horizon=30, videos=0, against=str(fitted))
+    printed = capsys.readouterr().out
+    assert "(fitted MuJoCo replaying the data)" in printed
+    assert re.search(r"^no motion +\d+\.\d\d +", printed, re.M)  # millimetres, 2 decimals
     # An unknown shipped fit is refused before anything is written.
     out = tmp_path / "none"
     assert main(["evaluate", "--checkpoint", str(zero), "--data", str(data), "--out", str(out),

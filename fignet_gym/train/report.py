@@ -45,17 +45,28 @@ def _pyplot() -> Any:
     return plt
 
 
+def _against_label(ag: dict[str, Any]) -> str:
+    """What ``--against`` was: a checkpoint, or MuJoCo with parameters that are fitted, or that
+    change nothing in the data's own MJCF (nominal)."""
+    if "checkpoint" in ag:
+        return ag["checkpoint"]
+    physics = {k for k in ag.get("params", {}) if k not in ("source", "substeps")}
+    kind = "fitted MuJoCo" if physics else "nominal MuJoCo (the data's own MJCF)"
+    return f"{ag['mujoco']} ({kind} replaying the data)"
+
+
 def print_table(res: dict[str, Any], label: str = "FIGNet") -> None:
     """Print the headline metrics against the reference models."""
     h = res["horizon_step"]
     print(f"{res['trajectories']} trajectories ({res['horizon_trajectories']} reach frame {h}); "
           f"errors at frame {h} from frame 0 ({res['seconds']:.2f} s) and at each one's last frame")
-    print(f"{'model':16s} {'transl. (m)':>12s} {'rot. (deg)':>11s} {'last transl.':>13s} "
+    # Millimetres: pushes err by tenths of a millimetre, which 4 decimals of metres hide.
+    print(f"{'model':16s} {'transl. (mm)':>12s} {'rot. (deg)':>11s} {'last tr. (mm)':>13s} "
           f"{'last rot.':>10s}")
     for name, pre in ((label, ""), ("no motion", "still_"), ("const. velocity", "constvel_")):
-        print(f"{name:16s} {res[pre + 'translation_rmse_final']:12.4f} "
-              f"{res[pre + 'rotation_deg_final']:11.2f} {res[pre + 'translation_rmse_last']:13.4f} "
-              f"{res[pre + 'rotation_deg_last']:10.2f}")
+        print(f"{name:16s} {1e3 * res[pre + 'translation_rmse_final']:12.2f} "
+              f"{res[pre + 'rotation_deg_final']:11.2f} "
+              f"{1e3 * res[pre + 'translation_rmse_last']:13.2f} {res[pre + 'rotation_deg_last']:10.2f}")
     ci_t, ci_r = res["translation_rmse_ratio_still_ci95"], res["rotation_deg_ratio_still_ci95"]
     print(f"ratio to no motion: translation {res['translation_rmse_ratio_still']:.1%} "
           f"(95% interval {ci_t[0]:.0%}-{ci_t[1]:.0%}), rotation {res['rotation_deg_ratio_still']:.1%} "
@@ -67,9 +78,8 @@ def print_table(res: dict[str, Any], label: str = "FIGNet") -> None:
               f"floor penetration ratio {res['penetration_ratio']:.2f}")
     if "against" in res:
         ag = res["against"]
-        who = ag["checkpoint"] if "checkpoint" in ag else f"{ag['mujoco']} (fitted MuJoCo replaying the data)"
-        print(f"against {who}: translation RMSE {ag['translation_rmse_final']:.4f} m, "
-              f"rotation {ag['rotation_deg_final']:.2f} deg")
+        print(f"against {_against_label(ag)}: translation RMSE "
+              f"{1e3 * ag['translation_rmse_final']:.2f} mm, rotation {ag['rotation_deg_final']:.2f} deg")
         for q, name in (("translation_rmse", "translation"), ("rotation_deg", "rotation"),
                         ("translation_rmse_last", "last-frame translation"),
                         ("rotation_deg_last", "last-frame rotation")):
