@@ -225,8 +225,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: 50, or the longest trajectory's last frame if shorter; each "
                    "trajectory's last frame is scored too)")
     e.add_argument("--videos", type=int_at_least(0), default=2, help="side-by-side videos to write")
-    e.add_argument("--against", help="second checkpoint (e.g. a baseline), or a fitted MuJoCo "
-                   "(mujoco:cube-real, or a parameters .json), on the same trajectories: ratio of "
+    e.add_argument("--against", help="second checkpoint (e.g. a baseline), or MuJoCo: "
+                   "mujoco:nominal (the data's own MJCF), a shipped fit (mujoco:push-real, "
+                   "mujoco:cube-real) or a parameters .json, on the same trajectories: ratio of "
                    "median errors with a bootstrap interval")
     e.set_defaults(func=_evaluate)
 

@@ -276,6 +276,12 @@ def test_evaluate_against_a_fitted_mujoco_file(pushes: list, tmp_path, capsys) -
     printed = capsys.readouterr().out
     assert "(fitted MuJoCo replaying the data)" in printed
     assert re.search(r"^no motion +\d+\.\d\d +", printed, re.M)  # millimetres, 2 decimals
+    # mujoco:nominal: each trajectory's own MJCF, which for generated pushes is the generator's
+    # scene, so it replays them as the parameters file above does.
+    nominal = evaluate(str(zero), str(data), str(tmp_path / "n"), horizon=30, videos=0,
+                       against="mujoco:nominal")["against"]
+    assert nominal["translation_rmse_final"] == pytest.approx(ag["translation_rmse_final"], rel=1e-6, abs=1e-9)
+    assert "(nominal MuJoCo (the data's own MJCF) replaying the data)" in capsys.readouterr().out
     # An unknown shipped fit is refused before anything is written.
     out = tmp_path / "none"
     assert main(["evaluate", "--checkpoint", str(zero), "--data", str(data), "--out", str(out),

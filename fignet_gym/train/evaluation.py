@@ -97,6 +97,10 @@ def rollout_metrics(sim: LearnedSimulator, trajs: list[Trajectory], scenes: list
     return out
 
 
+#: ``--against`` for MuJoCo exactly as each trajectory's stored MJCF says (no parameter changed).
+NOMINAL = "mujoco:nominal"
+
+
 def is_mujoco_spec(against: str) -> bool:
     """Whether ``--against`` names a fitted MuJoCo (``mujoco:<name>`` or a ``.json`` file) rather
     than a checkpoint."""
@@ -113,9 +117,10 @@ def evaluate(checkpoint: str, data: str, out: str, num: int | None = None,
     the longest trajectory where that is shorter; a horizon no trajectory reaches is refused
     before any rollout); the last frame of each is scored too.
 
-    ``against``: a second checkpoint rolled out on the same trajectories, or a fitted MuJoCo
-    replaying them from the same given poses (``mujoco:<name>``, a shipped fit such as
-    ``mujoco:cube-real``, or a path to a parameters JSON, :mod:`fignet_gym.dynamics.contact_params`);
+    ``against``: a second checkpoint rolled out on the same trajectories, or MuJoCo replaying them
+    from the same given poses: ``mujoco:nominal`` (each trajectory's own MJCF), a shipped fit
+    such as ``mujoco:cube-real``, or a path to a parameters JSON
+    (:mod:`fignet_gym.dynamics.contact_params`);
     the ratios of the two models' median errors, with bootstrap intervals, are printed and stored
     under ``"against"``.
     """
@@ -134,7 +139,8 @@ def evaluate(checkpoint: str, data: str, out: str, num: int | None = None,
     check_dt(trajs, sim.config.dt)
     other, params = None, None
     if against is not None and is_mujoco_spec(against):
-        params = ContactParams.load(fit_path(against), trajs[0].dt)
+        params = (ContactParams(source="nominal: the data's own MJCF") if against == NOMINAL
+                  else ContactParams.load(fit_path(against), trajs[0].dt))
         replays = [Replay(t) for t in trajs]  # refuses trajectories without an MJCF, up front
     elif against is not None:
         other = load_pretrained(against)
