@@ -276,14 +276,27 @@ def cube_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_sim2real_resume_refuses_another_fignet_recipe(cube_file: Path, tmp_path: Path,
-                                                       capsys: pytest.CaptureFixture[str]) -> None:
+                                                       capsys: pytest.CaptureFixture[str],
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
     """Was: ``--resume`` ignored ``--budget``, ``--config``, ``--set`` and ``--init``: one table
     compared sizes trained with different recipes, and no recipe was recorded."""
+    from fignet_gym.train import sim2real
+
     out = tmp_path / "run"
     argv = ["sim2real", "--data", str(cube_file), "--out", str(out), "--fractions", "0.5", "0.25",
             "0.25", "--sizes", "5", "--budget", "3", "--set", '{"training.lr": 1e-4}']
-    assert main(argv) == 2  # size 5 > the 2 training trajectories: stops after recording run.json
+    assert main(argv) == 2  # size 5 > the 2 training trajectories: refused, nothing written
     one_error_line(capsys, "size 5 exceeds")
+    assert not out.exists()
+    argv[argv.index("5")] = "2"
+
+    def killed(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        raise sim2real.Sim2RealError("killed after recording run.json")
+
+    with monkeypatch.context() as m:  # a run stopped right after recording its plan
+        m.setattr(sim2real, "write_split", killed)
+        assert main(argv) == 2
+    one_error_line(capsys, "killed after")
     recipe = json.loads((out / "run.json").read_text())["recipe"]
     assert recipe == {"config": "cube-real", "budget": 3, "set": {"training.lr": 1e-4}, "init": None}
     before = snapshot(out)
