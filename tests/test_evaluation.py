@@ -280,7 +280,8 @@ def test_evaluate_against_a_fitted_mujoco_file(pushes: list, tmp_path, capsys) -
     # scene, so it replays them as the parameters file above does.
     nominal = evaluate(str(zero), str(data), str(tmp_path / "n"), horizon=30, videos=0,
                        against="mujoco:nominal")["against"]
-    assert nominal["translation_rmse_final"] == pytest.approx(ag["translation_rmse_final"], rel=1e-6, abs=1e-9)
+    assert nominal["translation_rmse_final"] == pytest.approx(ag["translation_rmse_final"],
+                                                              rel=1e-6, abs=1e-9)
     assert "(nominal MuJoCo (the data's own MJCF) replaying the data)" in capsys.readouterr().out
     # An unknown shipped fit is refused before anything is written.
     out = tmp_path / "none"
