@@ -105,7 +105,7 @@ def _sim2real(args: argparse.Namespace) -> int:
                      fit_evaluations=args.fit_evaluations, fit_trajectories=args.fit_trajectories,
                      fignet=not args.no_fignet, pretrain=args.pretrain, config=args.config,
                      budget=args.budget, overrides=overrides, init=args.init,
-                     polish=not args.no_polish)
+                     polish=not args.no_polish, prior=args.prior)
     return 0
 
 
@@ -341,8 +341,13 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-polish", action="store_true",
                    help="skip the rollout polish of models with 64 or more training trajectories")
     r.add_argument("--pretrain", type=int_at_least(0), default=0, metavar="N",
-                   help="pretrain FIGNet on N synthetic tosses from MuJoCo fitted on the smallest "
-                        "size's trajectories, then fine-tune each size (0: from scratch)")
+                   help="pretrain FIGNet on N synthetic tosses or pushes from the model(s) fitted "
+                        "on the smallest size's trajectories, then fine-tune each size (0: none)")
+    from fignet_gym.train.sim2real import PRIORS
+
+    r.add_argument("--prior", choices=PRIORS, default="mujoco",
+                   help="--pretrain on pushes: the fitted model(s) the synthetic pushes come from "
+                        "(both: half each); pretraining starts from --init (default: %(default)s)")
     r.set_defaults(func=_sim2real)
 
     register_data(sub)

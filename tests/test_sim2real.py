@@ -22,6 +22,7 @@ from fignet_gym.train.analytic import Replay, finite_difference_state
 from fignet_gym.train.sysid import DEFAULT_SPACE, Dimension, ReplaySet, fit_contact_params, replay_loss
 
 SAMPLE = Path(__file__).parent / "data" / "contactnets_sample"
+MIT_SAMPLE = Path(__file__).parent / "data" / "mit_sample"
 DT = 1 / 148
 
 
@@ -351,8 +352,13 @@ def test_sim2real_pretrain_fits_on_the_smallest_subset_and_fine_tunes_each_size(
     assert parts["total"] == pytest.approx(stages)
     assert "initialised from" in capsys.readouterr().out
     # --pretrain and --init exclude each other; a run started without --pretrain is not resumed with it
-    assert main(argv + ["--init", "push", "--resume"]) == 2
-    assert "--pretrain and --init" in capsys.readouterr().err
+    # Refused before anything is written: tosses pretrain from scratch, on the MuJoCo prior only.
+    fresh = [str(tmp_path / "fresh") if a == str(out) else a for a in argv]
+    assert main(fresh + ["--init", "push"]) == 2
+    assert "--pretrain and --init: synthetic tosses pretrain from scratch" in capsys.readouterr().err
+    assert main(fresh + ["--prior", "limit-surface"]) == 2
+    assert "the limit surface models pushes" in capsys.readouterr().err
+    assert not (tmp_path / "fresh").exists()
     assert main([a if a != "3" else "0" for a in argv] + ["--resume"]) == 2
     assert "started with pretrain 3 (now 0):" in capsys.readouterr().err
     assert main(argv + ["--resume", "--no-polish"]) == 2  # polished sizes would be stale
@@ -449,3 +455,36 @@ def test_sim2real_refuses_before_writing_and_a_corrected_rerun_needs_no_resume(t
     assert not out.exists()
     assert main(["sim2real", "--data", str(data), "--sizes", "500", *common]) == 2
     assert not out.exists()  # so the corrected command (the end-to-end test above) runs as is
+
+
+def test_sim2real_pretrains_pushes_on_both_fitted_models_from_init(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
+    """``--pretrain N --prior both`` on real pushes: half the synthetic pushes from the MuJoCo and
+    half from the limit surface fitted on the smallest size, pretrained from ``--init``; each
+    size then fine-tunes it with the pushes' own recipe (not the tosses' gentle one)."""
+    import fignet_gym.train.sim2real as s2r
+    from fignet_gym.train.config import PRESETS
+
+    data, out = tmp_path / "abs.h5", tmp_path / "run"
+    assert main(["import-mit", str(MIT_SAMPLE), "--out", str(data), "--dt", "0.02"]) == 0
+    monkeypatch.setattr(s2r, "PUSH_PRETRAIN_STEPS", 2)
+    tiny = json.dumps({"training.valid_every": 1, "training.batch_size": 1,
+                       "training.valid_trajectories": 1})
+    assert main(["sim2real", "--data", str(data), "--out", str(out), "--fractions", "0.34", "0.33",
+                 "0.33", "--horizon", "25", "--fit-evaluations", "3", "--fit-trajectories", "1",
+                 "--sizes", "1", "--config", "push-finetune", "--init", "push", "--budget", "2",
+                 "--no-polish", "--pretrain", "4", "--prior", "both", "--set", tiny]) == 0
+    res = json.loads((out / "results.json").read_text())
+    pre = res["pretrain"]
+    assert pre["prior"] == "both" and pre["synthetic_pushes"] == 4 and pre["source_trajectories"] == 1
+    synth = load_trajectories(out / "pretrain" / "synthetic.h5")
+    pushes = {(t.metadata["synthetic_source"], t.metadata["file"]) for t in synth}
+    assert {src for src, _ in pushes} <= {"mujoco", "limit-surface"} and len(pushes) <= 4
+    assert json.loads((out / "pretrain" / "limit_surface_fit.json").read_text())["tip_friction"] > 0
+    assert json.loads((out / "run.json").read_text())["prior"] == "both"
+    printed = capsys.readouterr().out
+    pretraining = printed[printed.index("pretraining: FIGNet"):printed.index("FIGNet on 1 training")]
+    assert "initialised from push" in pretraining
+    fine = json.loads((out / "fignet_1" / "config.json").read_text())
+    assert fine["training"]["lr"] == PRESETS["push-finetune"]["training"]["lr"]
+    assert fine["training"]["lr"] != s2r.FINETUNE_OVERRIDES["training.lr"]

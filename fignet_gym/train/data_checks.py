@@ -21,6 +21,11 @@ GENERATED_SOURCE = "fignet_gym.generate"
 KUBRIC_SOURCE = "kubric_movi"
 
 
+def same_dt(data_dt: float, model_dt: float) -> bool:
+    """Whether data stored every ``data_dt`` s can be stepped by a model of step ``model_dt``."""
+    return abs(data_dt - model_dt) <= DT_RTOL * model_dt
+
+
 def check_dt(trajs: list[Trajectory], dt: float) -> None:
     """Raise ``ValueError`` naming the file and trajectory whose ``dt`` is not the model's ``dt``.
 
@@ -28,7 +33,7 @@ def check_dt(trajs: list[Trajectory], dt: float) -> None:
     50 Hz model would compare it with poses four steps away.
     """
     for t in trajs:
-        if abs(t.dt - dt) > DT_RTOL * dt:
+        if not same_dt(t.dt, dt):
             where = f"{t.source}: " if t.source else ""
             fix = (f"re-import with `fignet-gym import-mit ... --dt {dt:g}`"
                    if str(t.metadata.get("source", "")).startswith("mit_pushing")

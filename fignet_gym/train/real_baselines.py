@@ -25,10 +25,13 @@ from typing import Any
 import numpy as np
 
 from fignet_gym.data.format import Trajectory
+from fignet_gym.train.analytic import ContactParams
 
 #: The limit-surface grid: pusher-object friction and factor on the uniform-pressure radius.
 LS_FRICTIONS = (0.05, 0.1, 0.2, 0.3, 0.45, 0.65, 0.9, 1.3, 2.0, 3.0, 5.0)
 LS_SCALES = (0.6, 0.8, 1.0, 1.25, 1.5)
+#: The limit surface is quasi-static: one MuJoCo timestep per data step (the length does not matter).
+LS_STEP = ContactParams(substeps=1)
 #: Median absolute deviation to standard deviation for Gaussian noise.
 MAD_TO_STD = 1.4826
 #: Perturbed replays per test trajectory in :func:`noise_floor`.
@@ -129,33 +132,41 @@ def noise_floor(trajs: Sequence[Trajectory], params: Any, noise: dict[str, float
     return out
 
 
-def limit_surface_stage(train: Sequence[Trajectory], test: Sequence[Trajectory], given: int = 3,
-                        horizon: int = 50, fit_trajectories: int = 64, seed: int = 0
-                        ) -> dict[str, Any]:
-    """Fit :class:`LimitSurfaceDynamics` on ``train`` (grid :data:`LS_FRICTIONS` x
+def fit_limit_surface_on(train: Sequence[Trajectory], given: int = 3, horizon: int = 50,
+                         fit_trajectories: int = 64, seed: int = 0
+                         ) -> tuple[float, float, dict[str, float]]:
+    """Fit :class:`LimitSurfaceDynamics` on ``train``: grid :data:`LS_FRICTIONS` x
     :data:`LS_SCALES`, loss :func:`~fignet_gym.train.sysid.replay_loss` on a seeded sample of
-    ``fit_trajectories``) and score it on ``test`` (``predictor_metrics`` keys, ``params``,
-    ``grid``, ``cpu_seconds``)."""
+    ``fit_trajectories``; returns ``(tip_friction, pressure_scale, grid)``."""
     from fignet_gym.dynamics.limit_surface import LimitSurfaceDynamics, fit_limit_surface
-    from fignet_gym.train.analytic import ContactParams
-    from fignet_gym.train.evaluation import predictor_metrics
     from fignet_gym.train.sysid import ReplaySet, replay_loss
 
-    t0 = time.process_time()
     rng = np.random.default_rng(seed)
     pick = (rng.choice(len(train), fit_trajectories, replace=False).tolist()
             if len(train) > fit_trajectories else list(range(len(train))))
     fit_set = ReplaySet([train[i] for i in pick], given, horizon)
-    one_step = ContactParams(substeps=1)  # quasi-static: the step length does not matter
 
     def loss(dyn: LimitSurfaceDynamics) -> float:
         fit_set.dynamics = dyn
-        return replay_loss(fit_set.frame_errors(fit_set.predict(one_step)), given)
+        return replay_loss(fit_set.frame_errors(fit_set.predict(LS_STEP)), given)
 
-    mu, scale, grid = fit_limit_surface(loss, LS_FRICTIONS, LS_SCALES)
+    return fit_limit_surface(loss, LS_FRICTIONS, LS_SCALES)
+
+
+def limit_surface_stage(train: Sequence[Trajectory], test: Sequence[Trajectory], given: int = 3,
+                        horizon: int = 50, fit_trajectories: int = 64, seed: int = 0
+                        ) -> dict[str, Any]:
+    """:func:`fit_limit_surface_on` ``train``, scored on ``test`` (``predictor_metrics`` keys,
+    ``params``, ``grid``, ``cpu_seconds``)."""
+    from fignet_gym.dynamics.limit_surface import LimitSurfaceDynamics
+    from fignet_gym.train.evaluation import predictor_metrics
+    from fignet_gym.train.sysid import ReplaySet
+
+    t0 = time.process_time()
+    mu, scale, grid = fit_limit_surface_on(train, given, horizon, fit_trajectories, seed)
     test_set = ReplaySet(test, given, horizon)
     test_set.dynamics = LimitSurfaceDynamics(mu, scale)
-    out = predictor_metrics(list(test), test_set.predict(one_step), given, horizon)
+    out = predictor_metrics(list(test), test_set.predict(LS_STEP), given, horizon)
     out.update(params={"tip_friction": mu, "pressure_scale": scale}, grid=grid,
                cpu_seconds=time.process_time() - t0)
     return out
@@ -195,5 +206,5 @@ def run_stages(out: Any, train: Sequence[Trajectory], test: Sequence[Trajectory]
     return res
 
 
-__all__ = ["FLOOR_SAMPLES", "LS_FRICTIONS", "LS_SCALES", "limit_surface_stage", "noise_floor",
-           "perturb_start", "run_stages", "tracking_noise"]
+__all__ = ["FLOOR_SAMPLES", "LS_FRICTIONS", "LS_SCALES", "LS_STEP", "fit_limit_surface_on",
+           "limit_surface_stage", "noise_floor", "perturb_start", "run_stages", "tracking_noise"]

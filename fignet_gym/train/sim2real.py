@@ -58,6 +58,10 @@ PRETRAIN_STEPS = 8000
 #: pushforward from the first step (on 8 real tosses, 1e-4 or plain one-step training first lost
 #: the pretraining's rollouts within 250 steps; docs/experiments.md, real data,
 #: "Pretraining on a fitted MuJoCo").
+#: ``--pretrain`` on pushes: optimiser steps on the synthetic pushes (from ``--init``).
+PUSH_PRETRAIN_STEPS = 2000
+#: ``--prior``: the fitted analytic models synthetic pushes are drawn from (half each for both).
+PRIORS = ("mujoco", "limit-surface", "both")
 FINETUNE_OVERRIDES: dict[str, Any] = {"training.lr": 3e-5, "training.lr_final": 1e-5,
                                       "training.unroll_after": 0}
 
@@ -110,15 +114,30 @@ def _check_init_dt(data: str | os.PathLike, init: str) -> None:
     own ``dt``, and ``evaluate`` would refuse the pairing too."""
     from fignet_gym.data.format import TrajectoryFile
     from fignet_gym.pretrained import load_pretrained
-    from fignet_gym.train.data_checks import DT_RTOL
+    from fignet_gym.train.data_checks import same_dt
 
     dt = load_pretrained(init).config.dt
     with TrajectoryFile(data) as f:
         data_dt = f[0].dt
-    if abs(data_dt - dt) > DT_RTOL * dt:
+    if not same_dt(data_dt, dt):
         raise Sim2RealError(f"{data}: poses every {data_dt:g} s, but --init {init} steps {dt:g} s "
                             f"(re-import with `fignet-gym import-mit ... --dt {dt:g}`, or train "
                             "from scratch without --init)")
+
+
+def _check_pretrain(data: str | os.PathLike, init: str | None, prior: str) -> None:
+    """:class:`Sim2RealError` before anything is written if ``--pretrain`` cannot vary the
+    data's trajectories: tosses start from scratch and know only the MuJoCo prior."""
+    from fignet_gym.data.format import TrajectoryFile
+
+    with TrajectoryFile(data) as f:
+        push = _has_kinematic(f[0])
+    if not push and init is not None:
+        raise Sim2RealError("--pretrain and --init: synthetic tosses pretrain from scratch; "
+                            "pass one of the two")
+    if not push and prior != "mujoco":
+        raise Sim2RealError(f"--prior {prior}: the limit surface models pushes; tosses pretrain "
+                            "on the fitted MuJoCo only")
 
 
 def rests_on_floor(trajs: Sequence[Any], clearance: float = FLOOR_CLEARANCE) -> bool:
@@ -227,10 +246,12 @@ def run_sim2real(
     train_fn: TrainFn | None = None, fignet: bool = True, base_params: Any = None,
     pretrain: int = 0, config: str = "cube-real", budget: int | None = None,
     overrides: dict[str, Any] | None = None, init: str | None = None, polish: bool = True,
+    prior: str = "mujoco",
 ) -> dict[str, Any]:
     """Run every stage (see the module docstring) and return the results dict.
 
-    ``pretrain``: synthetic tosses to pretrain on (0: none). ``train_fn`` trains each size;
+    ``pretrain``: synthetic tosses or pushes to pretrain on (0: none), pushes drawn from
+    ``prior`` (:data:`PRIORS`) and pretrained from ``init``. ``train_fn`` trains each size;
     by default :func:`default_train` with ``config``, ``budget``, ``overrides`` and ``init``, or
     with ``pretrain`` a fine-tuning of :func:`pretrain_checkpoint` (:data:`FINETUNE_OVERRIDES`).
     ``config`` and ``overrides`` are also the pretraining's recipe. ``polish``: polish the
@@ -244,8 +265,8 @@ def run_sim2real(
     from fignet_gym.train.sysid import env_parameters, fit_contact_params
 
     out = Path(out)
-    if pretrain and init is not None:
-        raise Sim2RealError("--pretrain and --init both choose where FIGNet starts: pass one")
+    if prior not in PRIORS:
+        raise Sim2RealError(f"--prior {prior!r}: choose one of {', '.join(PRIORS)}")
     results_path = out / "results.json"
     if out.exists() and any(out.iterdir()) and not resume:
         raise Sim2RealError(f"{out}: already holds a sim2real run (pass --resume to continue it, "
@@ -254,9 +275,11 @@ def run_sim2real(
     run_cfg = {"data": str(data), "fractions": list(fractions), "seed": seed, "horizon": horizon,
                "given_poses": given, "fit_evaluations": fit_evaluations,
                "fit_trajectories": fit_trajectories, "pretrain": pretrain, "polish": polish}
+    if pretrain:
+        run_cfg["prior"] = prior
     old = _read(config_path)
     # Runs from before a key existed ran with its old behaviour (no pretraining, no polish).
-    absent = {"pretrain": 0, "polish": False}
+    absent = {"pretrain": 0, "polish": False, "prior": "mujoco"}
     then = {k: old.get(k, absent.get(k)) for k in run_cfg} if old is not None else run_cfg
     changed = [f"{k} {then[k]!r} (now {v!r})" for k, v in run_cfg.items() if then[k] != v]
     if changed:
@@ -272,7 +295,9 @@ def run_sim2real(
         check_single_scene_type(data, "--data")
         planned = file_split(data, fractions, seed)  # too few recordings: refused here too
         _check_sizes(sizes if fignet else (), len(planned.train), data)
-    if fignet and init is not None and pretrain == 0:
+    if pretrain and fignet:
+        _check_pretrain(data, init, prior)
+    if fignet and init is not None:
         _check_init_dt(data, init)
     out.mkdir(parents=True, exist_ok=True)
     _write(config_path, run_cfg)
@@ -323,15 +348,21 @@ def run_sim2real(
         k0 = min([s for s in sizes if s is not None], default=n_train)
         info = _pretrain(train[:k0], valid, split_dir / "valid.h5", out / "pretrain", pretrain,
                          config=config, overrides=overrides, fit_evaluations=fit_evaluations,
-                         fit_trajectories=fit_trajectories, given=given, horizon=horizon, seed=seed)
+                         fit_trajectories=fit_trajectories, given=given, horizon=horizon, seed=seed,
+                         prior=prior, init=init)
         stages["pretrain"] = info
         cpu_hours["pretrain"] = info["cpu_hours"]
     learned: dict[str, Any] = {}
     if fignet:
-        if train_fn is None:
-            train_fn = (default_train(config, budget, {**FINETUNE_OVERRIDES, **(overrides or {})},
-                                      init=str(pretrain_checkpoint(out)), polish=polish)
-                        if pretrain else default_train(config, budget, overrides, init, polish))
+        if train_fn is None and pretrain:
+            # Tosses fine-tune gently (FINETUNE_OVERRIDES); pushes with their own recipe, the
+            # one a fine-tune from --init uses, so the two compare at the same budget.
+            sets = (overrides if any(_has_kinematic(t) for t in train)
+                    else {**FINETUNE_OVERRIDES, **(overrides or {})})
+            train_fn = default_train(config, budget, sets, init=str(pretrain_checkpoint(out)),
+                                     polish=polish)
+        elif train_fn is None:
+            train_fn = default_train(config, budget, overrides, init, polish)
         for size in sizes:
             label = _size_label(size)
             path = out / f"fignet_{label}.json"
@@ -407,36 +438,79 @@ def _check_recipe(config_path: Path, stored: dict[str, Any] | None,
 
 def _pretrain(train: list, valid: list, valid_file: Path, out: Path, num: int, *, config: str,
               overrides: dict[str, Any] | None, fit_evaluations: int, fit_trajectories: int,
-              given: int, horizon: int, seed: int) -> dict[str, Any]:
-    """The ``pretrain/`` stage (module docstring) on the real trajectories ``train``; resumable."""
+              given: int, horizon: int, seed: int, prior: str = "mujoco", init: str | None = None,
+              budget: int | None = None) -> dict[str, Any]:
+    """The ``pretrain/`` stage (module docstring) on the real trajectories ``train``; resumable.
+
+    Tosses vary their releases in the fitted MuJoCo; pushes (trajectories with a kinematic
+    pusher) draw new pushes of the same objects (:mod:`fignet_gym.train.synthetic_push`) from
+    ``prior``: ``"mujoco"``, ``"limit-surface"`` or ``"both"`` (half each), each fitted on
+    ``train``, and pretrain from ``init`` (``None``: from scratch)."""
     from fignet_gym.data.format import write_trajectories
     from fignet_gym.train.analytic import ContactParams
     from fignet_gym.train.real import free_flight_gravity, train_on_split
     from fignet_gym.train.synthetic import check_tosses, synthetic_tosses
     from fignet_gym.train.sysid import fit_contact_params
 
-    try:
-        check_tosses(train)
-    except ValueError as exc:
-        raise Sim2RealError(f"--pretrain: {exc}") from None
+    push = any(_has_kinematic(t) for t in train)
+    if not push:
+        try:
+            check_tosses(train)
+        except ValueError as exc:
+            raise Sim2RealError(f"--pretrain: {exc}") from None
     out.mkdir(parents=True, exist_ok=True)
-    print(f"pretraining: MuJoCo fitted on {len(train)} training trajectories ...")
-    fit = fit_contact_params(train, valid, out / "fit.json", evaluations=fit_evaluations,
-                             fit_trajectories=min(fit_trajectories, len(train)), given=given,
-                             horizon=horizon, seed=seed)
-    synth = out / "synthetic.h5"
     t0 = time.process_time()
+    fit: dict[str, Any] = {}
+    ls: dict[str, float] = {}
+    if prior in ("mujoco", "both"):
+        print(f"pretraining: MuJoCo fitted on {len(train)} training trajectories ...")
+        fit = fit_contact_params(train, valid, out / "fit.json", evaluations=fit_evaluations,
+                                 fit_trajectories=min(fit_trajectories, len(train)), given=given,
+                                 horizon=horizon, seed=seed,
+                                 space=push_space(kinematic=True) if push else None)
+    if prior in ("limit-surface", "both"):
+        ls_path = out / "limit_surface_fit.json"
+        if ls_path.is_file():
+            ls = json.loads(ls_path.read_text())
+        else:
+            from fignet_gym.train.real_baselines import fit_limit_surface_on
+
+            print(f"pretraining: limit surface fitted on {len(train)} training trajectories ...")
+            mu, scale, _ = fit_limit_surface_on(train, given, horizon, fit_trajectories, seed)
+            ls = {"tip_friction": mu, "pressure_scale": scale}
+            write_text(ls_path, json.dumps(ls, indent=1))
+    synth = out / "synthetic.h5"
     if not synth.is_file():
-        write_trajectories(synth, synthetic_tosses(train, ContactParams.from_json(fit["params"]),
-                                                   num, seed))
+        if push:
+            from fignet_gym.train.synthetic_push import PushSource, synthetic_pushes
+
+            sources = []
+            if fit:
+                sources.append(PushSource.mujoco(ContactParams.from_json(fit["params"])))
+            if ls:
+                sources.append(PushSource.limit_surface(ls["tip_friction"], ls["pressure_scale"]))
+            trajs = []
+            for k, src in enumerate(sources):
+                share = num // len(sources) + (1 if k < num % len(sources) else 0)
+                trajs += synthetic_pushes(train, src, share, seed + k, name=f"synthetic-{src.name}")
+        else:
+            trajs = synthetic_tosses(train, ContactParams.from_json(fit["params"]), num, seed)
+        write_trajectories(synth, trajs)
     gen_seconds = time.process_time() - t0
-    print(f"pretraining: FIGNet on {num} synthetic tosses ...")
-    sets = {"simulator.gravity": (0.0, 0.0, free_flight_gravity(train)), **(overrides or {})}
-    best = train_on_split(synth, valid_file, None, out / "run", PRETRAIN_STEPS, config=config,
-                          overrides=sets, seed=seed)
+    kind = "pushes" if push else "tosses"
+    print(f"pretraining: FIGNet on {num} synthetic {kind} ({prior}) ...")
+    if push:
+        sets = {"simulator.gravity": prior_gravity(config, init), **(overrides or {})}
+        steps = budget or PUSH_PRETRAIN_STEPS
+    else:
+        sets = {"simulator.gravity": (0.0, 0.0, free_flight_gravity(train)), **(overrides or {})}
+        steps = PRETRAIN_STEPS
+    best = train_on_split(synth, valid_file, None, out / "run", steps, config=config,
+                          overrides=sets, seed=seed, init=init)
     done = json.loads((out / "run" / "done.json").read_text())
-    return {"source_trajectories": len(train), "synthetic_tosses": num, "checkpoint": str(best),
-            "fit": fit["params"], "fit_valid": fit["valid"],
+    return {"source_trajectories": len(train), f"synthetic_{kind}": num, "prior": prior,
+            "checkpoint": str(best), "fit": fit.get("params"), "fit_valid": fit.get("valid"),
+            "limit_surface": ls or None, "steps": steps,
             "cpu_hours": (fit.get("cpu_seconds", 0.0) + gen_seconds) / 3600 + done["cpu_hours"]}
 
 
