@@ -227,8 +227,10 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--videos", type=int_at_least(0), default=2, help="side-by-side videos to write")
     e.add_argument("--against", help="second checkpoint (e.g. a baseline), or MuJoCo: "
                    "mujoco:nominal (the data's own MJCF), a shipped fit (mujoco:push-real, "
-                   "mujoco:cube-real) or a parameters .json, on the same trajectories: ratio of "
-                   "median errors with a bootstrap interval")
+                   "mujoco:cube-real) or a parameters .json, or the quasi-static pushing model "
+                   "limit-surface:push-real (or limit-surface:FIT.json), on the same trajectories: "
+                   "ratio of median errors with a bootstrap interval, per trajectory and per "
+                   "recording")
     e.set_defaults(func=_evaluate)
 
     f = sub.add_parser("floor", help="MuJoCo's own rollout error from a slightly wrong start "

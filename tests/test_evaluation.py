@@ -25,7 +25,7 @@ from fignet_gym.train.evaluation import evaluate, rollout_metrics
 from fignet_gym.train.floor import perturbation_floor
 from fignet_gym.train.metrics import predictor_metrics, rotation_gain
 from fignet_gym.train.one_step import one_step_errors, spin_change
-from fignet_gym.train.stats import median_ratio_interval, paired_ratios
+from fignet_gym.train.stats import median_ratio_interval, paired_ratios, per_recording
 from tests.sim_factories import SMALL, quiet_simulator, zero_simulator
 
 
@@ -88,6 +88,30 @@ def test_grouped_bootstrap_resamples_whole_recordings() -> None:
     assert naive[1] - naive[0] < 0.8 * (plain[1] - plain[0])
     with pytest.raises(ValueError, match="1 keys for 15 trajectories"):
         median_ratio_interval(model, ref, groups=["a"])
+
+
+def test_per_recording_medians_average_each_recordings_windows_first() -> None:
+    """Hand case: windows (1, 3) of push a and (10) of push b average to (2, 10), median 6; the
+    reference (1, 1) and (5) gives (1, 5), median 3, so the ratio is 2. Over windows the medians
+    would be 3 and 1 (ratio 3): a push cut into many windows must not count many times."""
+    res = {"translation_rmse_per_trajectory": [1.0, 3.0, 10.0],
+           "still_translation_rmse_per_trajectory": [4.0, 4.0, 4.0],
+           "rotation_deg_per_trajectory": [2.0, 2.0, 2.0],
+           "still_rotation_deg_per_trajectory": [1.0, 1.0, 1.0], "groups_final": ["a", "a", "b"]}
+    res.update({k.replace("_per", "_last_per"): v for k, v in res.items() if "per_traj" in k},
+               groups_last=["a", "a", "b"])
+    ref = {k: v for k, v in res.items()}
+    ref["translation_rmse_per_trajectory"] = [1.0, 1.0, 5.0]
+    ref["translation_rmse_last_per_trajectory"] = [1.0, 1.0, 5.0]
+    out = per_recording(res, ref)
+    assert out["recordings_final"] == 2 and out["translation_rmse_final"] == 6.0
+    assert out["still_translation_rmse_final"] == 4.0
+    assert out["vs"]["translation_rmse"][0] == pytest.approx(2.0)
+    assert out["vs"]["rotation_deg"][0] == pytest.approx(1.0)
+    assert per_recording(ref)["translation_rmse_final"] == 3.0
+    mixed = dict(ref, groups_final=["a", "b", "b"])
+    with pytest.raises(ValueError, match="recordings differ"):
+        per_recording(res, mixed)
 
 
 def test_rotation_gain_hand_cases() -> None:

@@ -111,3 +111,55 @@ def test_evaluate_scores_the_shipped_push_fit_on_a_users_file(tmp_path) -> None:
         params = replace(ContactParams.from_json(shipped), friction_kinematic=tip_friction)
         m = predictor_metrics(trajs, replay_all(trajs, params), 3, 25)
         assert (m["rotation_deg_final"] == pytest.approx(ag["rotation_deg_final"])) == same
+
+
+def test_evaluate_against_the_shipped_limit_surface_scores_its_replays(tmp_path, capsys) -> None:
+    """``--against limit-surface:push-real`` replays the user's pushes in the shipped
+    limit-surface fit: the reference errors are those of ``LimitSurfaceDynamics`` with the
+    shipped numbers through the same replay path (another tip friction scores otherwise), the
+    label says what it is, and the per-push view averages each push's windows first."""
+    import json
+    from pathlib import Path
+
+    from sim_factories import zero_simulator
+
+    from fignet_gym.cli import main
+    from fignet_gym.data.format import load_trajectories
+    from fignet_gym.data.split import trajectory_groups
+    from fignet_gym.dynamics.limit_surface import LimitSurfaceDynamics
+    from fignet_gym.pretrained import pretrained_dir
+    from fignet_gym.simulator.checkpoint import save
+    from fignet_gym.train.analytic import replay_all
+    from fignet_gym.train.evaluation import evaluate
+    from fignet_gym.train.metrics import predictor_metrics
+    from fignet_gym.train.real_baselines import LS_STEP
+
+    data, zero = tmp_path / "abs.h5", tmp_path / "zero.pt"
+    sample = Path(__file__).parent / "data" / "mit_sample"
+    assert main(["import-mit", str(sample), "--out", str(data), "--dt", str(STEP_SECONDS)]) == 0
+    save(zero_simulator("push", dt=STEP_SECONDS), zero)
+    res = evaluate(str(zero), str(data), str(tmp_path / "e"), horizon=25, videos=0,
+                   against="limit-surface:push-real")
+    shipped = json.loads((pretrained_dir() / "push-real.limit_surface.json").read_text())
+    ag = res["against"]
+    assert ag["params"] == {k: shipped[k] for k in ("tip_friction", "pressure_scale")}
+    trajs = load_trajectories(data)
+    for mu, same in ((shipped["tip_friction"], True), (1.0, False)):
+        dyn = LimitSurfaceDynamics(mu, shipped["pressure_scale"])
+        m = predictor_metrics(trajs, replay_all(trajs, LS_STEP, dyn), 3, 25)
+        assert (m["rotation_deg_final"] == pytest.approx(ag["rotation_deg_final"])) == same
+    assert "quasi-static limit surface, tip friction 0.2" in capsys.readouterr().out
+    groups = trajectory_groups(trajs)
+    assert len(set(groups)) < len(groups)  # a long push gives several windows
+    pr = res["per_recording"]
+    assert pr["recordings_last"] == len(set(groups))
+    per = {}
+    for g, e in zip(groups, res["translation_rmse_last_per_trajectory"], strict=True):
+        per.setdefault(g, []).append(e)
+    assert pr["translation_rmse_last"] == pytest.approx(np.median([np.mean(v) for v in per.values()]))
+    # Bad specs: one line each, before any rollout.
+    for spec, msg in (("limit-surface:nope", "neither a shipped limit-surface fit"),):
+        assert main(["evaluate", "--checkpoint", str(zero), "--data", str(data), "--out",
+                     str(tmp_path / "bad"), "--against", spec]) == 2
+        err = capsys.readouterr().err
+        assert msg in err and "limit-surface:push-real" in err and len(err.strip().splitlines()) == 1

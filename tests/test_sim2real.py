@@ -488,3 +488,55 @@ def test_sim2real_pretrains_pushes_on_both_fitted_models_from_init(
     fine = json.loads((out / "fignet_1" / "config.json").read_text())
     assert fine["training"]["lr"] == PRESETS["push-finetune"]["training"]["lr"]
     assert fine["training"]["lr"] != s2r.FINETUNE_OVERRIDES["training.lr"]
+
+
+def test_fit_counts_mujoco_instabilities_in_one_line_and_its_bar_ends_at_its_total(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
+    """MuJoCo's 'Nan, Inf or huge value' warnings during the fit are counted per candidate and
+    summarised in one line, never printed raw nor appended to ``MUJOCO_LOG.TXT`` in the working
+    directory; the progress bar's total is the evaluations CMA-ES really runs (whole
+    generations), and it ends there."""
+    import fignet_gym.train.sysid as sysid
+
+    trajs = _synthetic_tosses(3, 0.45, 1.0, "elliptic")
+    blow = mujoco.MjModel.from_xml_string(
+        "<mujoco><worldbody><body><freejoint/><geom size='1'/></body></worldbody></mujoco>")
+    calls = {"n": 0}
+    predict = ReplaySet.predict
+
+    def unstable_every_third(self, params):
+        calls["n"] += 1
+        if calls["n"] % 3 == 0:  # a real MuJoCo instability warning
+            d = mujoco.MjData(blow)
+            d.qvel[:] = 1e30
+            mujoco.mj_step(blow, d)
+        return predict(self, params)
+
+    bars = []
+
+    class Bar:
+        def __init__(self, total=None, **_):
+            self.total, self.first_total, self.n = total, total, 0
+            bars.append(self)
+
+        def update(self, k):
+            self.n += k
+
+        def close(self):
+            self.closed = (self.n, self.total)
+
+    monkeypatch.setattr(ReplaySet, "predict", unstable_every_third)
+    monkeypatch.setattr(sysid, "tqdm", Bar)
+    monkeypatch.chdir(tmp_path)
+    fit = fit_contact_params(trajs[:2], trajs[2:], None, base=ContactParams(dampratio=1.0),
+                             space=(Dimension("friction", 0.05, 1.5),), cones=("elliptic",),
+                             evaluations=7, substeps=(4,))
+    run = fit["cone_runs"][0]
+    out = capsys.readouterr().out
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+    assert "WARNING" not in out and "Nan, Inf" in out and out.count("went unstable") == 1
+    assert run["unstable_candidates"] == run["evaluations"] // 3  # the fit's own replays
+    (bar,) = bars
+    assert bar.closed == (run["evaluations"], run["evaluations"]) and run["evaluations"] > 7
+    assert bar.first_total == run["evaluations"]  # shown from the start, not corrected at the end
+    assert mujoco.get_mju_user_warning() is None  # MuJoCo's own handler is back

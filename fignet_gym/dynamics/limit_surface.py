@@ -24,14 +24,18 @@ its duration (the model has no momentum).
 
 from __future__ import annotations
 
+import json
 import math
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import mujoco
 import numpy as np
 
 from fignet_gym.dynamics.base import DivergenceError, DynamicsBase
+from fignet_gym.pretrained import pretrained_dir
 
 #: Longest pusher displacement (m) integrated in one piece: the contact normal and point are
 #: re-read after each piece (a 5 cm push is integrated in 200 pieces).
@@ -271,5 +275,38 @@ def fit_limit_surface(loss: Callable[[LimitSurfaceDynamics], float], frictions: 
     return mu, s, grid
 
 
-__all__ = ["MAX_PIECE", "LimitSurfaceDynamics", "PlanarGeometry", "closest_on_hull", "convex_hull",
-           "fit_limit_surface", "planar_geometry", "pressure_radius", "pusher_twist"]
+#: ``--against limit-surface:<name>`` (a shipped fit, ``pretrained/<name>.limit_surface.json``)
+#: or ``limit-surface:<path>`` (a JSON file, such as ``sim2real``'s ``limit_surface.json``).
+LS_PREFIX = "limit-surface:"
+LS_SUFFIX = ".limit_surface.json"
+
+
+def available_limit_surfaces() -> list[str]:
+    """Names of the shipped limit-surface fits (``pretrained/<name>.limit_surface.json``)."""
+    return sorted(p.name[: -len(LS_SUFFIX)] for p in pretrained_dir().glob(f"*{LS_SUFFIX}"))
+
+
+def load_limit_surface(spec: str | os.PathLike) -> LimitSurfaceDynamics:
+    """The model a ``limit-surface:<name or path>`` spec names: a JSON object with
+    ``tip_friction`` and ``pressure_scale``, at its top level or under ``params`` (as
+    ``sim2real`` writes ``limit_surface.json``); ``ValueError`` in one line otherwise."""
+    text = str(spec)
+    body = text[len(LS_PREFIX):] if text.startswith(LS_PREFIX) else text
+    path = pretrained_dir() / f"{body}{LS_SUFFIX}"
+    if not path.is_file():
+        path = Path(body)
+    if not path.is_file():
+        names = ", ".join(LS_PREFIX + n for n in available_limit_surfaces()) or "none"
+        raise ValueError(f"{text}: neither a shipped limit-surface fit ({names}) nor a JSON file")
+    try:
+        raw = json.loads(path.read_text())
+        raw = raw.get("params", raw)
+        return LimitSurfaceDynamics(float(raw["tip_friction"]), float(raw["pressure_scale"]))
+    except (json.JSONDecodeError, AttributeError, KeyError, TypeError) as err:
+        raise ValueError(f"{path}: not a limit-surface fit (needs tip_friction and "
+                         f"pressure_scale; {type(err).__name__}: {err})") from None
+
+
+__all__ = ["LS_PREFIX", "LS_SUFFIX", "MAX_PIECE", "available_limit_surfaces", "closest_on_hull",
+           "convex_hull", "fit_limit_surface", "LimitSurfaceDynamics", "load_limit_surface",
+           "planar_geometry", "PlanarGeometry", "pressure_radius", "pusher_twist"]

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
+from collections.abc import Iterator
 
 import mujoco
 import numpy as np
@@ -140,6 +142,26 @@ class MujocoDynamics(DynamicsBase):
         if self._pool is not None:
             self._pool.close()
             self._pool = None
+
+
+@contextlib.contextmanager
+def collect_warnings() -> Iterator[list[str]]:
+    """Collect MuJoCo's warnings (``Nan, Inf or huge value in QACC ...``) in the yielded list
+    instead of letting MuJoCo print each and append it to ``MUJOCO_LOG.TXT`` in the working
+    directory; the previous handler is restored on exit. Callers count and summarise them."""
+    got: list[str] = []
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(got.append)
+    try:
+        yield got
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
+def unstable_summary(what: str, unstable: int, total: int) -> str:
+    """One line saying how many of ``total`` replays (or candidates) ``what`` made MuJoCo warn."""
+    return (f"{what}: MuJoCo went unstable in {unstable} of {total} (its 'Nan, Inf or huge value' "
+            "warning; each such replay holds its last finite poses and is scored as it is)")
 
 
 def mocap_bodies(model: mujoco.MjModel) -> np.ndarray:

@@ -20,6 +20,8 @@ import torch
 from fignet_gym.data.format import Trajectory, build_scene, load_trajectories
 from fignet_gym.data.split import trajectory_groups
 from fignet_gym.dynamics.contact_params import SHIPPED_PREFIX, ContactParams, fit_path
+from fignet_gym.dynamics.limit_surface import LS_PREFIX, load_limit_surface
+from fignet_gym.dynamics.mujoco import MujocoDynamics, collect_warnings, unstable_summary
 from fignet_gym.pretrained import load_pretrained
 from fignet_gym.simulator.model import LearnedSimulator
 from fignet_gym.simulator.scene import Scene
@@ -35,9 +37,10 @@ from fignet_gym.train.metrics import (
     yaw_fit,
 )
 from fignet_gym.train.one_step import one_step_errors
+from fignet_gym.train.real_baselines import LS_STEP
 from fignet_gym.train.report import plot_curves, print_table, write_comparison_video
 from fignet_gym.train.rollouts import ROLLOUT_BATCH, learned_rollouts, length_groups, pad_poses
-from fignet_gym.train.stats import paired_ratios
+from fignet_gym.train.stats import paired_ratios, per_recording
 
 #: Side-by-side videos ``evaluate`` writes by default.
 DEFAULT_VIDEOS = 2
@@ -101,6 +104,11 @@ def rollout_metrics(sim: LearnedSimulator, trajs: list[Trajectory], scenes: list
 NOMINAL = "mujoco:nominal"
 
 
+def is_limit_surface_spec(against: str) -> bool:
+    """Whether ``--against`` names a limit-surface fit (``limit-surface:<name or path>``)."""
+    return against.startswith(LS_PREFIX)
+
+
 def is_mujoco_spec(against: str) -> bool:
     """Whether ``--against`` names a fitted MuJoCo (``mujoco:<name>`` or a ``.json`` file) rather
     than a checkpoint."""
@@ -117,12 +125,16 @@ def evaluate(checkpoint: str, data: str, out: str, num: int | None = None,
     the longest trajectory where that is shorter; a horizon no trajectory reaches is refused
     before any rollout); the last frame of each is scored too.
 
-    ``against``: a second checkpoint rolled out on the same trajectories, or MuJoCo replaying them
-    from the same given poses: ``mujoco:nominal`` (each trajectory's own MJCF), a shipped fit
-    such as ``mujoco:cube-real``, or a path to a parameters JSON
-    (:mod:`fignet_gym.dynamics.contact_params`);
+    ``against``: a second checkpoint rolled out on the same trajectories, or an analytic model
+    replaying them from the same given poses: ``mujoco:nominal`` (each trajectory's own MJCF),
+    a shipped fit such as ``mujoco:cube-real``, a path to a parameters JSON
+    (:mod:`fignet_gym.dynamics.contact_params`), or the quasi-static pushing model
+    ``limit-surface:push-real`` (a shipped fit) or ``limit-surface:<path.json>``;
     the ratios of the two models' median errors, with bootstrap intervals, are printed and stored
-    under ``"against"``.
+    under ``"against"``. Where several trajectories come from one recording (the windows of a
+    real push), ``"per_recording"`` (and ``"against"["per_recording"]``) holds the same medians
+    over recordings, each recording's windows averaged (:func:`~fignet_gym.train.stats.
+    per_recording`). MuJoCo's instability warnings are counted in one line, not printed.
     """
     if (num is not None and num < 1) or (horizon is not None and horizon < 1) or videos < 0:
         raise ValueError(f"evaluate: num and horizon must be >= 1 and videos >= 0, got "
@@ -137,8 +149,17 @@ def evaluate(checkpoint: str, data: str, out: str, num: int | None = None,
                          f"{longest + 1} poses): pass --horizon {longest} or less")
     check_data_matches(sim, trajs, data)
     check_dt(trajs, sim.config.dt)
-    other, params = None, None
-    if against is not None and is_mujoco_spec(against):
+    other, params, dynamics = None, None, None
+    if against is not None and is_limit_surface_spec(against):
+        dynamics = load_limit_surface(against)
+        params = LS_STEP
+        replays = [Replay(t) for t in trajs]
+        for r in replays:  # not a push scene: refused up front, in one line
+            try:
+                dynamics.validate(r.base, 1)
+            except ValueError as err:
+                raise ValueError(f"{data}: trajectory {r.traj.name!r}: {err}") from None
+    elif against is not None and is_mujoco_spec(against):
         params = (ContactParams(source="nominal: the data's own MJCF") if against == NOMINAL
                   else ContactParams.load(fit_path(against), trajs[0].dt))
         replays = [Replay(t) for t in trajs]  # refuses trajectories without an MJCF, up front
@@ -151,16 +172,33 @@ def evaluate(checkpoint: str, data: str, out: str, num: int | None = None,
     res.update(checkpoint=str(checkpoint), data=str(data))
     if against is not None:
         given = sim.config.history + 1
-        if params is not None:
-            preds = replay_all(trajs, params, given=given, replays=replays)
+        if dynamics is not None:
+            preds = replay_all(trajs, params, dynamics, given=given, replays=replays)
             ref = predictor_metrics(trajs, preds, given, horizon)
-            who = {"mujoco": str(against), "params": params.to_json()}
+            who = {"limit_surface": str(against), "params": {
+                "tip_friction": dynamics.tip_friction, "pressure_scale": dynamics.pressure_scale}}
+        elif params is not None:
+            with collect_warnings() as warned:
+                preds = []
+                unstable = 0
+                for r in replays:
+                    before = len(warned)
+                    preds.append(r.rollout(params, MujocoDynamics(nthread=1), given))
+                    unstable += len(warned) > before
+            if unstable:
+                print(unstable_summary(f"--against {against} replays", unstable, len(replays)))
+            ref = predictor_metrics(trajs, preds, given, horizon)
+            who = {"mujoco": str(against), "params": params.to_json(), "unstable_replays": unstable}
         else:
             ref = rollout_metrics(other, trajs, horizon=horizon)
             who = {"checkpoint": str(against)}
         res["against"] = {**who, "ratios": paired_ratios(res, ref),
                           **{k: ref[k] for k in ("translation_rmse_final", "rotation_deg_final",
                                                  "translation_rmse_last", "rotation_deg_last")}}
+    if len(set(trajectory_groups(trajs))) < len(trajs):
+        res["per_recording"] = per_recording(res, ref if against is not None else None)
+        if against is not None:
+            res["against"]["per_recording"] = per_recording(ref)
     (outdir / "metrics.json").write_text(json.dumps(res, indent=2))
     print_table(res)
     plot_curves(res, outdir / "errors.png")

@@ -50,6 +50,10 @@ def _against_label(ag: dict[str, Any]) -> str:
     change nothing in the data's own MJCF (nominal)."""
     if "checkpoint" in ag:
         return ag["checkpoint"]
+    if "limit_surface" in ag:
+        prm = ag["params"]
+        return (f"{ag['limit_surface']} (quasi-static limit surface, tip friction "
+                f"{prm['tip_friction']:g}, pressure radius x {prm['pressure_scale']:g})")
     physics = {k for k in ag.get("params", {}) if k not in ("source", "substeps")}
     kind = "fitted MuJoCo" if physics else "nominal MuJoCo (the data's own MJCF)"
     return f"{ag['mujoco']} ({kind} replaying the data)"
@@ -85,6 +89,21 @@ def print_table(res: dict[str, Any], label: str = "FIGNet") -> None:
                         ("rotation_deg_last", "last-frame rotation")):
             r, lo, hi = ag["ratios"][q]
             print(f"  ratio of medians (this / that), {name}: {r:.3f} (95% interval {lo:.3f}-{hi:.3f})")
+    if "per_recording" in res:
+        pr = res["per_recording"]
+        print(f"per recording ({pr['recordings_final']} recordings reach frame {h}, each one's "
+              f"trajectories averaged, then the median): {label} "
+              f"{1e3 * pr['translation_rmse_final']:.2f} mm "
+              f"/ {pr['rotation_deg_final']:.2f} deg, no motion "
+              f"{1e3 * pr['still_translation_rmse_final']:.2f} mm / {pr['still_rotation_deg_final']:.2f} deg")
+        if "against" in res:
+            ag = res["against"]["per_recording"]
+            print(f"  against: {1e3 * ag['translation_rmse_final']:.2f} mm / "
+                  f"{ag['rotation_deg_final']:.2f} deg")
+            for q, name in (("translation_rmse", "translation"), ("rotation_deg", "rotation")):
+                r, lo, hi = pr["vs"][q]
+                print(f"  ratio of medians over recordings, {name}: {r:.3f} (95% interval, recordings "
+                      f"resampled, {lo:.3f}-{hi:.3f})")
     if "rotation_gain" in res:
         print(f"rotation gain (predicted / true turn of objects turning > 1 deg, median) "
               f"{res['rotation_gain']:.2f}; one-step spin gain (teacher-forced) "

@@ -75,3 +75,35 @@ def paired_ratios(res: dict[str, Any], ref: dict[str, Any]) -> dict[str, Any]:
             out[f"{q}{suffix}"] = [res[f"{q}_{at}"] / den if den > 0 else math.nan,
                                    *median_ratio_interval(a, b, groups=groups)]
     return out
+
+def per_recording(res: dict[str, Any], ref: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The per-recording view of :func:`score_rollouts` results: each recording's trajectories
+    (``groups_final`` / ``groups_last``; the windows of one real push) averaged, then the median
+    over recordings, so that a long push cut into ten windows counts once. Keys
+    ``translation_rmse_final`` ... ``rotation_deg_last`` (and ``still_*``: no motion),
+    ``recordings_final`` / ``recordings_last``; with ``ref`` (scored on the same trajectories),
+    ``vs`` holds ``[ratio, lo, hi]`` per quantity, the interval a bootstrap over recordings.
+    """
+    out: dict[str, Any] = {}
+    vs: dict[str, Any] = {}
+    for at, suffix in (("final", ""), ("last", "_last")):
+        n = len(res[f"translation_rmse{suffix}_per_trajectory"])
+        members = [np.asarray(m) for m in group_members(n, res.get(f"groups_{at}"))]
+        out[f"recordings_{at}"] = len(members)
+        for q in ("translation_rmse", "rotation_deg"):
+            for pre in ("", "still_"):
+                a = np.asarray(res[f"{pre}{q}{suffix}_per_trajectory"])
+                out[f"{pre}{q}_{at}"] = float(np.median([a[m].mean() for m in members]))
+            if ref is None:
+                continue
+            if ref.get(f"groups_{at}", res.get(f"groups_{at}")) != res.get(f"groups_{at}"):
+                raise ValueError("per-recording ratios need the same trajectories (recordings differ)")
+            a, b = (np.array([np.asarray(r[f"{q}{suffix}_per_trajectory"])[m].mean() for m in members])
+                    for r in (res, ref))
+            den = float(np.median(b))
+            vs[f"{q}{suffix}"] = [float(np.median(a)) / den if den > 0 else math.nan,
+                                  *median_ratio_interval(a, b)]
+    if ref is not None:
+        out["vs"] = vs
+    return out
+

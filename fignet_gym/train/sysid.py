@@ -29,7 +29,7 @@ from tqdm import tqdm
 
 from fignet_gym.data.format import Trajectory
 from fignet_gym.dynamics.contact_params import CONES, ContactParams
-from fignet_gym.dynamics.mujoco import MujocoDynamics
+from fignet_gym.dynamics.mujoco import MujocoDynamics, collect_warnings, unstable_summary
 from fignet_gym.simulator.geometry import transform_points
 from fignet_gym.train.analytic import GIVEN_POSES, Replay
 
@@ -188,7 +188,9 @@ def fit_contact_params(
         space: searched parameters (default :data:`DEFAULT_SPACE`, plus
             :data:`KINEMATIC_ONLY` when the scenes have kinematic objects).
         evaluations: CMA-ES candidates per cone (each replays ``fit_trajectories`` training
-            trajectories, a seeded sample of ``train``).
+            trajectories, a seeded sample of ``train``), rounded up to whole generations. MuJoCo's
+            instability warnings are counted (``unstable_candidates`` per cone, one summary
+            line), not printed, and no ``MUJOCO_LOG.TXT`` is written.
         substeps: candidates chosen on validation (default: :data:`SUBSTEP_FACTORS` times the
             MJCF's own, i.e. ``base.substeps`` or ``dt / timestep``).
         out: JSON file of the result; a finished run there is returned as is (resumable per cone:
@@ -196,6 +198,22 @@ def fit_contact_params(
 
     Returns ``{"params": ContactParams JSON, "cone_runs": [...], "valid": summary, ...}``.
     """
+    with collect_warnings() as warned:  # the validation replays' (the search counts its own)
+        result = _fit(train, valid, out, base=base, space=space, cones=cones,
+                      evaluations=evaluations, fit_trajectories=fit_trajectories, given=given,
+                      horizon=horizon, seed=seed, substeps=substeps, progress=progress)
+    if warned and progress:
+        print(f"fit MuJoCo, validation replays: MuJoCo warned {len(warned)} times ("
+              f"{warned[0].split('.')[0]}); such replays hold their last finite poses and score "
+              "as they are")
+    return result
+
+
+def _fit(train: Sequence[Trajectory], valid: Sequence[Trajectory], out: str | os.PathLike | None,
+         *, base: ContactParams | None, space: Sequence[Dimension] | None, cones: Sequence[str],
+         evaluations: int, fit_trajectories: int, given: int, horizon: int, seed: int,
+         substeps: Sequence[int] | None, progress: bool) -> dict[str, Any]:
+    """:func:`fit_contact_params` inside its warning collector."""
     out_path = Path(out) if out is not None else None
     if out_path is not None and out_path.is_file():
         return json.loads(out_path.read_text())
@@ -233,20 +251,30 @@ def fit_contact_params(
         history = []
         bar = None
         if progress:
-            bar = tqdm(total=evaluations, desc=f"fit MuJoCo ({cone} cone)", unit="eval",
+            # CMA-ES stops after the generation that reaches ``evaluations``: whole generations.
+            total = -(-evaluations // es.popsize) * es.popsize
+            bar = tqdm(total=total, desc=f"fit MuJoCo ({cone} cone)", unit="eval",
                        leave=False)
-        while not es.stop():
-            xs = es.ask()
-            losses = []
-            for x in xs:
-                p = _params_at(base, dims, np.asarray(x), cone)
-                losses.append(replay_loss(fit_set.frame_errors(fit_set.predict(p)), given))
-                if bar is not None:
-                    bar.update(1)
-            es.tell(xs, losses)
-            history.append(float(min(losses)))
+        unstable = 0
+        with collect_warnings() as warned:
+            while not es.stop():
+                xs = es.ask()
+                losses = []
+                for x in xs:
+                    p = _params_at(base, dims, np.asarray(x), cone)
+                    before = len(warned)
+                    losses.append(replay_loss(fit_set.frame_errors(fit_set.predict(p)), given))
+                    unstable += len(warned) > before
+                    if bar is not None:
+                        bar.update(1)
+                es.tell(xs, losses)
+                history.append(float(min(losses)))
         if bar is not None:
+            bar.total = bar.n  # a search that converged early ends where it stopped
             bar.close()
+        if unstable and progress:
+            print(unstable_summary(f"fit MuJoCo ({cone} cone) candidates", unstable,
+                                   int(es.result.evaluations)))
         cands = {"best": np.asarray(es.result.xbest), "mean": np.asarray(es.result.xfavorite)}
         cand_res = {}
         for label, x in cands.items():
@@ -255,7 +283,8 @@ def fit_contact_params(
             cand_res[label] = {"params": p.to_json(), "valid_loss": replay_loss(errs, given),
                                "valid": summary(errs, horizon)}
         runs.append({"cone": cone, "train_loss_best": float(es.result.fbest),
-                     "evaluations": int(es.result.evaluations), "loss_per_iteration": history,
+                     "evaluations": int(es.result.evaluations), "unstable_candidates": unstable,
+                     "loss_per_iteration": history,
                      "candidates": cand_res})
         if partial_path is not None:
             partial_path.parent.mkdir(parents=True, exist_ok=True)
