@@ -396,6 +396,14 @@ def run_sim2real(
                                             if k in r}} for name, r in extra.items()},
                "fignet": {k: {**headline(v), "training_trajectories": v["training_trajectories"],
                               "vs_fitted_mujoco": v["vs_fitted_mujoco"]} for k, v in learned.items()}}
+    scored = {"MuJoCo, nominal": nominal, "MuJoCo, fitted": fitted,
+              **({"limit surface, fitted": extra["limit_surface"]} if "limit_surface" in extra else {}),
+              **{f"FIGNet, {v['training_trajectories']} train": v for v in learned.values()}}
+    if len(set(fitted.get("groups_final") or [])) < fitted["horizon_trajectories"]:
+        # Several windows per recording (long real pushes): each recording counts once too.
+        from fignet_gym.train.stats import per_recording
+
+        results["per_recording"] = {k: per_recording(r, fitted) for k, r in scored.items()}
     _write(results_path, results)
     table = format_table(results)
     (out / "table.md").write_text(table + "\n")

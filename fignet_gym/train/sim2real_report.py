@@ -21,6 +21,8 @@ def headline(res: dict[str, Any], prefix: str = "") -> dict[str, Any]:
         ratio = res.get(f"{q}{suffix}_ratio_still") if not prefix else 1.0
         out[f"{key}_ratio_still"] = ratio
     out["horizon_step"] = res["horizon_step"]
+    if "seconds" in res:
+        out["seconds"] = res["seconds"]
     out["trajectories"] = res["trajectories"]
     return out
 
@@ -29,8 +31,10 @@ def format_table(results: dict[str, Any]) -> str:
     """Markdown table of the headline errors (and % of no motion) of every model."""
     h = results["mujoco_fitted"]["horizon_step"]
     n = results["mujoco_fitted"]["trajectories"]
+    sec = results["mujoco_fitted"].get("seconds")
+    at = f"frame {h} ({sec:.2f} s)" if sec is not None else f"frame {h}"
     head = ["model"] + [f"{name.replace('@h', f'@{h}')}" for _, name in _QUANTITIES]
-    lines = [f"Test split: {n} trajectories; medians at frame {h} (from frame 0) and at each "
+    lines = [f"Test split: {n} trajectories; medians at {at} (from frame 0) and at each "
              "trajectory's last frame; (x%) = fraction of the no-motion model's error.", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
 
@@ -69,6 +73,22 @@ def format_table(results: dict[str, Any]) -> str:
                      for k in ("translation_rmse", "rotation_deg", "translation_rmse_last",
                                "rotation_deg_last")]
             lines.append(f"| {r['training_trajectories']} | " + " | ".join(cells) + " |")
+    if "per_recording" in results:
+        per = results["per_recording"]
+        first = next(iter(per.values()))
+        lines += ["", f"Per recording (each recording's test trajectories averaged, then the median "
+                  f"over the {first['recordings_final']} recordings; a push cut into many windows "
+                  f"counts once), at {at}; ratio to fitted MuJoCo, bootstrap over recordings:",
+                  "", "| model | transl. (mm) | rot. (deg) | ratio transl. | ratio rot. |",
+                  "|---|---|---|---|---|",
+                  f"| no motion | {1e3 * first['still_translation_rmse_final']:.2f} | "
+                  f"{first['still_rotation_deg_final']:.2f} | | |"]
+        for label, r in per.items():
+            v = r["vs"]
+            lines.append(f"| {label} | {1e3 * r['translation_rmse_final']:.2f} | "
+                         f"{r['rotation_deg_final']:.2f} | " + " | ".join(
+                             f"{v[k][0]:.2f} [{v[k][1]:.2f}, {v[k][2]:.2f}]"
+                             for k in ("translation_rmse", "rotation_deg")) + " |")
     return "\n".join(lines)
 
 
