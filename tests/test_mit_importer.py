@@ -368,9 +368,28 @@ def test_shift_refit_at_a_fixed_rotation_leaves_its_start(theta0: float) -> None
     shift-only refit, with the rotation boxed to theta0 +- 1e-9, never moved from (0, 0)."""
     shift = np.array([0.0006, -0.0004])
     pts = np.concatenate(_square_contacts(shift, 0.0))
-    theta, found, _ = geo._refine(pts, np.ones(len(pts)), geo.outline("rect1"), theta0, False)
+    theta, found, _, (ended, evals) = geo._refine(pts, np.ones(len(pts)), geo.outline("rect1"),
+                                                  theta0, False)
     assert theta == pytest.approx(theta0 % (2 * math.pi))
     np.testing.assert_allclose(found, shift, atol=2e-5)
+    assert ended == "converged" and evals > 1
+
+
+def test_the_report_says_how_each_shapes_refit_ended() -> None:
+    """``check-mit``'s convergence column: a shift the contacts pin converges; one beyond
+    ``MAX_OFFSET_SHIFT`` stops at the bound and says so (weakly determined or wrong outline)."""
+    from fignet_gym.data.mit import MitReport, _refit_label
+
+    pinned = np.concatenate(_square_contacts(np.array([0.0006, -0.0004]), 0.0))
+    far = np.concatenate(_square_contacts(np.array([2.0 * geo.MAX_OFFSET_SHIFT, 0.0]), 0.0))
+    poly = geo.outline("rect1")
+    ok = geo.estimate_offset(poly, [pinned[i::4] for i in range(4)])
+    bound = geo.estimate_offset(poly, [far[i::4] for i in range(4)])
+    assert ok.refit == "converged" and bound.refit == "at bound"
+    assert ok.as_json()["refit"] == "converged" and ok.evaluations > 1
+    assert _refit_label(ok).startswith("converged (") and _refit_label(geo.FrameOffset()) == "-"
+    report = MitReport()
+    assert "refit" in report.table().splitlines()[0]
 
 
 @pytest.mark.parametrize("turn", [-1.0, 0.5, 2.0, 89.0])

@@ -149,7 +149,7 @@ class MitReport:
     def table(self) -> str:
         """Per-shape lines: pushes, contact frames, offset, distance quantiles, inside fraction."""
         rows = [f"{'shape':8s} {'pushes':>6s} {'still':>5s} {'frames':>6s} {'offset deg':>10s} "
-                f"{'shift mm':>12s} {'status':9s} distance q05/q50/q95 mm  inside>1mm"]
+                f"{'shift mm':>12s} {'status':9s} distance q05/q50/q95 mm  inside>1mm  refit"]
         for name, c in sorted(self.shapes.items()):
             q = np.quantile(c.distances, (0.05, 0.5, 0.95)) * 1e3 if len(c.distances) else []
             qs = "/".join(f"{v:.2f}" for v in q) if len(q) else "-"
@@ -157,8 +157,15 @@ class MitReport:
             o = c.offset
             rows.append(f"{name:8s} {c.pushes:6d} {len(c.still):5d} {len(c.distances):6d} "
                         f"{np.degrees(o.theta):10.1f} {1e3 * o.shift[0]:5.2f},{1e3 * o.shift[1]:5.2f}"
-                        f"  {o.status:9s} {qs:24s} {inside}")
+                        f"  {o.status:9s} {qs:24s} {inside}  {_refit_label(o)}")
         return "\n".join(rows)
+
+
+def _refit_label(o: geo.FrameOffset) -> str:
+    """The offset refit's convergence for the report (``-`` where nothing was refitted)."""
+    if not o.refit:
+        return "-"
+    return f"{o.refit} ({o.evaluations} ev)"
 
 
 def _outline(shape: str, protocol: MitProtocol) -> np.ndarray:

@@ -211,6 +211,10 @@ class FrameOffset:
             measured on the ABS pushes is used); ``"given"`` (by the user, e.g. measured on a
             larger folder).
         pushes, frames: how many pushes and contact frames the estimate used.
+        refit: how the last robust refit ended: ``"converged"``, ``"at bound"`` (a shift
+            component at ``MAX_OFFSET_SHIFT``: weakly determined, e.g. along the one side every
+            push touched), ``"not converged"`` (scipy's evaluation limit) or ``""`` (no refit).
+        evaluations: residual evaluations of that refit.
     """
 
     theta: float = 0.0
@@ -218,6 +222,8 @@ class FrameOffset:
     status: str = "default"
     pushes: int = 0
     frames: int = 0
+    refit: str = ""
+    evaluations: int = 0
 
     def to_outline_frame(self, points: np.ndarray) -> np.ndarray:
         """Recorded-frame points ``float[N, 2]`` in the outline frame."""
@@ -229,7 +235,8 @@ class FrameOffset:
 
     def as_json(self) -> dict[str, object]:
         return {"theta_deg": math.degrees(self.theta), "shift_mm": [1e3 * v for v in self.shift],
-                "status": self.status, "pushes": self.pushes, "frames": self.frames}
+                "status": self.status, "pushes": self.pushes, "frames": self.frames,
+                "refit": self.refit, "evaluations": self.evaluations}
 
 
 def _lopsided(residual: np.ndarray) -> np.ndarray:
@@ -251,9 +258,10 @@ def _thin(points: np.ndarray) -> np.ndarray:
 
 
 def _refine(pts: np.ndarray, w: np.ndarray, poly: np.ndarray, theta0: float,
-            free_theta: bool) -> tuple[float, np.ndarray, float]:
+            free_theta: bool) -> tuple[float, np.ndarray, float, tuple[str, int]]:
     """Robust fit of the shift (and the rotation, near ``theta0``, if ``free_theta``): rotation,
-    shift ``float[2]`` and the final cost.
+    shift ``float[2]``, the final cost and how the solver ended (:attr:`FrameOffset.refit`,
+    evaluations).
 
     A fixed rotation is left out of the unknowns rather than boxed in: the bounded solver keeps
     every step strictly inside all bounds at once, so a rotation pinned to ``theta0 +- 1e-9`` near
@@ -276,7 +284,13 @@ def _refine(pts: np.ndarray, w: np.ndarray, poly: np.ndarray, theta0: float,
         x0 = [0.0, 0.0]
     fit = least_squares(residuals, x0, loss="soft_l1", f_scale=RESIDUAL_SCALE, bounds=(lo, hi))
     theta, shift = (float(fit.x[0]), fit.x[1:]) if free_theta else (theta0, fit.x)
-    return theta % (2 * math.pi), shift.copy(), float(fit.cost)
+    if fit.status <= 0:
+        ended = "not converged"
+    elif np.abs(shift).max() >= MAX_OFFSET_SHIFT * (1 - 1e-3):  # bounded steps stay inside
+        ended = "at bound"
+    else:
+        ended = "converged"
+    return theta % (2 * math.pi), shift.copy(), float(fit.cost), (ended, int(fit.nfev))
 
 
 def estimate_offset(poly: np.ndarray, contacts: Sequence[np.ndarray]) -> FrameOffset:
@@ -304,17 +318,18 @@ def estimate_offset(poly: np.ndarray, contacts: Sequence[np.ndarray]) -> FrameOf
     score = np.array([_robust_cost(signed_distance(pts @ rotation(a).T, poly) - TIP_RADIUS, w)
                       for a in grid])
     if float(score.max() - score.min()) < SYMMETRY_TOLERANCE * float(score.min()):
-        _, shift, _ = _refine(pts, w, poly, 0.0, free_theta=False)
-        return FrameOffset(0.0, (float(shift[0]), float(shift[1])), "symmetric", len(used), frames)
-    theta, shift, cost = _refine(pts, w, poly, float(grid[int(np.argmin(score))]), True)
+        _, shift, _, ended = _refine(pts, w, poly, 0.0, free_theta=False)
+        return FrameOffset(0.0, (float(shift[0]), float(shift[1])), "symmetric", len(used), frames,
+                           *ended)
+    theta, shift, cost, ended = _refine(pts, w, poly, float(grid[int(np.argmin(score))]), True)
     status = "measured"
     sym = symmetry_angle(poly)
     # distance to the nearest quarter turn, counting rotations the outline is invariant under
     off = min(((theta - k * math.pi / 2 + sym / 2) % sym - sym / 2 for k in range(4)), key=abs)
     if abs(off) <= math.radians(QUARTER_TURN_DEG):
-        theta, shift, _ = _refine(pts, w, poly, (theta - off) % (2 * math.pi), False)
+        theta, shift, _, ended = _refine(pts, w, poly, (theta - off) % (2 * math.pi), False)
         status = "quarter"
-    return FrameOffset(theta, (float(shift[0]), float(shift[1])), status, len(used), frames)
+    return FrameOffset(theta, (float(shift[0]), float(shift[1])), status, len(used), frames, *ended)
 
 
 def symmetry_angle(poly: np.ndarray) -> float:
