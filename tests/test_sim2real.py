@@ -540,3 +540,32 @@ def test_fit_counts_mujoco_instabilities_in_one_line_and_its_bar_ends_at_its_tot
     assert bar.closed == (run["evaluations"], run["evaluations"]) and run["evaluations"] > 7
     assert bar.first_total == run["evaluations"]  # shown from the start, not corrected at the end
     assert mujoco.get_mju_user_warning() is None  # MuJoCo's own handler is back
+
+
+def test_the_table_orders_sizes_and_says_seconds_and_the_per_recording_view() -> None:
+    """Rows by training-set size whatever order ``--sizes`` was typed in; the horizon in seconds
+    beside its frame; the per-recording block when the run has one."""
+    from fignet_gym.train.sim2real_report import format_table
+
+    def r(tr: float, n: int | None = None) -> dict:
+        out = {k: tr for k in ("translation_rmse_final", "rotation_deg_final",
+                               "translation_rmse_last", "rotation_deg_last")}
+        out.update({f"{k}_ratio_still": 0.5 for k in list(out)}, horizon_step=25, trajectories=22,
+                   seconds=0.5)
+        if n is not None:
+            out.update(training_trajectories=n, vs_fitted_mujoco={
+                k: [1.0, 0.5, 2.0] for k in ("translation_rmse", "rotation_deg",
+                                             "translation_rmse_last", "rotation_deg_last")})
+        return out
+
+    rec = {"recordings_final": 11, "translation_rmse_final": 0.004, "rotation_deg_final": 6.0,
+           "still_translation_rmse_final": 0.03, "still_rotation_deg_final": 7.7,
+           "vs": {"translation_rmse": [0.5, 0.3, 1.2], "rotation_deg": [0.4, 0.2, 1.1]}}
+    results = {"mujoco_fitted": r(0.001), "mujoco_nominal": r(0.002), "no_motion": r(0.008),
+               "fignet": {"all": r(0.003, 47), "8": r(0.004, 8)},
+               "per_recording": {"MuJoCo, fitted": rec, "FIGNet, 8 train": rec}}
+    table = format_table(results)
+    assert table.index("FIGNet, 8 train |") < table.index("FIGNet, 47 train |")
+    assert table.index("| 8 |") < table.index("| 47 |")
+    assert "frame 25 (0.50 s)" in table and "over the 11 recordings" in table
+    assert "| FIGNet, 8 train | 4.00 | 6.00 | 0.50 [0.30, 1.20] | 0.40 [0.20, 1.10] |" in table

@@ -398,7 +398,8 @@ def run_sim2real(
                               "vs_fitted_mujoco": v["vs_fitted_mujoco"]} for k, v in learned.items()}}
     scored = {"MuJoCo, nominal": nominal, "MuJoCo, fitted": fitted,
               **({"limit surface, fitted": extra["limit_surface"]} if "limit_surface" in extra else {}),
-              **{f"FIGNet, {v['training_trajectories']} train": v for v in learned.values()}}
+              **{f"FIGNet, {v['training_trajectories']} train": v
+                 for v in sorted(learned.values(), key=lambda v: v["training_trajectories"])}}
     if len(set(fitted.get("groups_final") or [])) < fitted["horizon_trajectories"]:
         # Several windows per recording (long real pushes): each recording counts once too.
         from fignet_gym.train.stats import per_recording

@@ -56,7 +56,8 @@ def format_table(results: dict[str, Any]) -> str:
         nf = results["noise_floor"]
         lines.append(row(f"noise floor ({1000 * nf['noise']['position_m']:.3f} mm, "
                          f"{nf['noise']['rotation_deg']:.3f} deg)", nf))
-    for r in results["fignet"].values():
+    by_size = sorted(results["fignet"].values(), key=lambda r: r["training_trajectories"])
+    for r in by_size:
         lines.append(row(f"FIGNet, {r['training_trajectories']} train", r))
     if "vs_fitted_mujoco" in results.get("limit_surface", {}):
         v = results["limit_surface"]["vs_fitted_mujoco"]
@@ -67,7 +68,7 @@ def format_table(results: dict[str, Any]) -> str:
                   "(paired bootstrap 95% interval):", "",
                   "| training trajectories | transl. @h | rot. @h | transl. last | rot. last |",
                   "|---|---|---|---|---|"]
-        for r in results["fignet"].values():
+        for r in by_size:
             v = r["vs_fitted_mujoco"]
             cells = [f"{v[k][0]:.2f} [{v[k][1]:.2f}, {v[k][2]:.2f}]"
                      for k in ("translation_rmse", "rotation_deg", "translation_rmse_last",
