@@ -231,3 +231,35 @@ def test_user_dynamics_object_works_in_single_and_vector_envs() -> None:
     assert dyn.calls == before + 3
     with pytest.raises(ValueError, match="only apply to dynamics given by name"):
         gym.make("fignet_gym/Push-v0", dynamics=dyn, checkpoint="x.pt")
+
+
+def test_push_reward_is_the_hand_computed_sum_of_its_terms_from_mujocos_own_state() -> None:
+    """The reward Push-v2 returns, against the documented formula computed here from MuJoCo's
+    ``qpos`` (the object's yaw from its quaternion, not the task's helpers): a flipped sign or
+    a wrong heading error in ``envs/tasks.py`` fails this, where comparing ``env.step`` with the
+    same task code cannot."""
+    import math
+
+    import mujoco
+
+    env = gym.make("fignet_gym/Push-v2", dynamics="mujoco")
+    _, _ = env.reset(seed=3)
+    u = env.unwrapped
+    free = [j for j in range(u.model.njnt) if u.model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+    adr = int(u.model.jnt_qposadr[free[0]])
+    action = np.array([0.4, -0.7])
+    _, reward, _, _, info = env.step(action)
+    qpos = u.data.qpos[adr:adr + 7]
+    yaw = 2.0 * math.atan2(qpos[6], qpos[3])  # a rotation about z: q = (cos, 0, 0, sin)
+    dyaw = abs((u.goal[2] - yaw + math.pi) % (2 * math.pi) - math.pi)
+    dpos = float(np.hypot(*(u.goal[:2] - qpos[:2])))
+    t = u.task
+    expected = (-t.position_weight * dpos - t.orientation_weight * dyaw
+                - t.action_weight * float(action @ action))
+    if t.success_weight:
+        expected += t.success_weight * float(dpos < t.success_position and dyaw < t.success_yaw)
+    assert dyaw > 0.02 and dpos > 0.01  # both terms matter in this case
+    assert reward == pytest.approx(expected, rel=1e-9, abs=1e-12)
+    assert info["reward_orientation"] == pytest.approx(-t.orientation_weight * dyaw)
+    assert info["orientation_error"] == pytest.approx(dyaw)
+    env.close()
