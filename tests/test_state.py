@@ -7,6 +7,8 @@ where the environment is, for single and vector environments, and for both backe
 
 from __future__ import annotations
 
+import warnings
+
 import gymnasium as gym
 import mujoco
 import numpy as np
@@ -234,10 +236,16 @@ def test_zero_quaternion_is_normalised_as_mujoco_does(backend: str) -> None:
     b = dyn.rollout(model, good, control, frame_skip=10)
     assert np.isfinite(a).all()
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-9)
-    # a zero mocap quaternion too
+    # a zero mocap quaternion too: the identity, as MuJoCo normalises it (no 0/0 on the way)
     control[..., 3:] = 0.0
-    c = dyn.rollout(model, good, control, frame_skip=10)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        c = dyn.rollout(model, good, control, frame_skip=10)
     assert np.isfinite(c).all()
+    control[..., 3] = 1.0
+    qpos = slice(1, 1 + model.nq)  # time, then qpos (the stored mocap target stays as given)
+    np.testing.assert_allclose(c[..., qpos], dyn.rollout(model, good, control, frame_skip=10)[..., qpos],
+                               rtol=0, atol=1e-9)
 
 
 def test_history_rebuilt_from_qvel_reads_the_angular_velocity_in_the_body_frame() -> None:

@@ -180,6 +180,8 @@ def interpolate_mocap(start: np.ndarray, targets: np.ndarray, substeps: int, nmo
     frac = (np.arange(1, substeps + 1) / substeps)[None, None, :, None]
     path = prev[:, :, None] + (targets - prev)[:, :, None] * frac  # [B, T, S, C]
     q = path[..., 3 * nmocap :].reshape(*path.shape[:-1], nmocap, 4)
-    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    norm = np.linalg.norm(q, axis=-1, keepdims=True)
+    # A zero blend (a zero target quaternion) is the identity, as mju_normalize4 makes it.
+    q[:] = np.where(norm > 0, q / np.where(norm > 0, norm, 1.0), np.array([1.0, 0.0, 0.0, 0.0]))
     path[..., 3 * nmocap :] = q.reshape(*path.shape[:-1], nmocap * 4)
     return path.reshape(path.shape[0], -1, path.shape[-1])
