@@ -1,12 +1,12 @@
-"""Agents: model-predictive planners and PPO helpers (installed as ``fignet_gym.agents``).
+"""Agents: model-predictive planners, and PPO in :mod:`fignet_gym.agents.ppo` (installed as
+``fignet_gym.agents``).
 
 Planners (:mod:`~fignet_gym.agents.planners`) plan any environment that exposes its task (Push,
 Toss, CubeToss, a user's own) by batched rollouts of any :class:`~fignet_gym.dynamics.Dynamics`.
-PPO (:func:`~fignet_gym.agents.ppo_run.run_ppo`, what ``fignet-gym ppo`` runs) trains
-stable-baselines3 PPO on either dynamics in a resumable run folder and evaluates the policy on both
-(:func:`~fignet_gym.agents.ppo_eval.evaluate_policy_on`); :mod:`~fignet_gym.agents.ppo_table` puts
-finished runs in the transfer table; :func:`~fignet_gym.agents.ppo_shipped.load_policy` loads a
-shipped policy by name (``"push-ppo"``) or a run folder's.
+PPO (:mod:`fignet_gym.agents.ppo`: ``run_ppo``, what ``fignet-gym ppo`` runs, evaluation on both
+dynamics, the transfer table, ``load_policy`` for shipped policies) needs stable-baselines3 and
+TensorBoard; importing this package for the planners loads neither: the PPO names below are
+imported from :mod:`fignet_gym.agents.ppo` when first used.
 """
 
 from fignet_gym.agents.baselines import IdleAgent, RandomAgent
@@ -23,12 +23,6 @@ from fignet_gym.agents.planners import (
     planner_config,
 )
 from fignet_gym.agents.policy_agent import PolicyAgent
-from fignet_gym.agents.ppo_config import PPOConfig, RunConfig
-from fignet_gym.agents.ppo_eval import EVAL_KEYS, evaluate_policy_on
-from fignet_gym.agents.ppo_policy import NormalizedPolicy, load_run_policy
-from fignet_gym.agents.ppo_run import run_ppo
-from fignet_gym.agents.ppo_shipped import available_policies, load_policy
-from fignet_gym.agents.ppo_table import transfer_table
 from fignet_gym.agents.task import (
     PLAN_STATE_SPEC,
     PlanningProblem,
@@ -71,3 +65,17 @@ __all__ = [
     "run_ppo",
     "transfer_table",
 ]
+
+#: Names re-exported from :mod:`fignet_gym.agents.ppo`, imported on first use (PEP 562).
+_PPO_NAMES = ("EVAL_KEYS", "NormalizedPolicy", "PPOConfig", "RunConfig", "available_policies",
+              "evaluate_policy_on", "load_policy", "load_run_policy", "run_ppo", "transfer_table")
+
+
+def __getattr__(name: str) -> object:
+    if name in _PPO_NAMES:
+        # Deferred: the PPO stack (stable-baselines3, TensorBoard) only for those who use it.
+        import fignet_gym.agents.ppo as ppo
+
+        return getattr(ppo, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+

@@ -15,7 +15,7 @@ step; a run folder holds checkpoints (re-running resumes, a larger ``--steps`` e
 TensorBoard logs (``tensorboard --logdir runs``), ``progress.csv``, ``eval.csv`` (success and
 return on both dynamics during training) and ``final_eval.json``. ``--ship NAME`` runs
 ``fignet-gym ppo-ship`` on the finished run (into ``--ship-dest``, default: the package's shipped
-policies). The work is done by ``fignet_gym.agents.ppo_run.run_ppo`` (what ``fignet-gym ppo`` runs).
+policies). The work is done by ``fignet_gym.agents.ppo.run.run_ppo`` (what ``fignet-gym ppo`` runs).
 """
 
 from __future__ import annotations
@@ -26,8 +26,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
-from fignet_gym.agents import RunConfig, run_ppo, transfer_table
-from fignet_gym.agents.ppo_shipped import policies_dir
+from fignet_gym.agents.ppo import RunConfig, run_ppo, transfer_table
+from fignet_gym.agents.ppo.shipped import policies_dir
 from fignet_gym.tools.ppo_ship import ship_policy
 
 #: The shipped policy whose recipe this example trains.

@@ -27,9 +27,9 @@ import numpy as np
 from stable_baselines3 import PPO
 
 import fignet_gym.envs  # noqa: F401  (registers the environments)
-from fignet_gym.agents.ppo_eval import EVAL_SEED
-from fignet_gym.agents.ppo_policy import NormalizedPolicy, load_normalizer, load_run_policy, run_transform
-from fignet_gym.agents.ppo_rundir import CHECKPOINT, MODEL, NORMALIZER, saved_config
+from fignet_gym.agents.ppo.eval import EVAL_SEED
+from fignet_gym.agents.ppo.policy import NormalizedPolicy, load_normalizer, load_run_policy, run_transform
+from fignet_gym.agents.ppo.rundir import CHECKPOINT, MODEL, NORMALIZER, saved_config
 from fignet_gym.atomic import write_text
 
 #: A contact this many steps before the end or fewer counts as "still pushing".

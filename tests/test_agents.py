@@ -14,21 +14,23 @@ from sim_factories import wild_simulator
 
 import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.agents import (
-    EVAL_KEYS,
     CEMConfig,
     CEMPlanner,
     MPPIConfig,
     MPPIPlanner,
-    PPOConfig,
     PushProblem,
+    plan_state,
+    run_episode,
+)
+from fignet_gym.agents.ppo import (
+    EVAL_KEYS,
+    PPOConfig,
     RunConfig,
     evaluate_policy_on,
     load_run_policy,
-    plan_state,
-    run_episode,
     run_ppo,
 )
-from fignet_gym.agents.ppo_callback import RunCallback
+from fignet_gym.agents.ppo.callback import RunCallback
 from fignet_gym.dynamics import DivergenceError, DynamicsBase, FIGNetDynamics, MujocoDynamics
 from fignet_gym.mjcf import push_object
 from fignet_gym.simulator.checkpoint import save

@@ -33,7 +33,7 @@ def test_defaults_match_the_env() -> None:
 def test_defaults_are_the_shipped_policys_recipe() -> None:
     from dataclasses import replace
 
-    from fignet_gym.agents import load_policy
+    from fignet_gym.agents.ppo import load_policy
 
     ex = load_example()
     shipped = load_policy(ex.SHIPPED).config

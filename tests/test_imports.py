@@ -10,7 +10,7 @@ ROOT = Path(__file__).resolve().parents[1] / "fignet_gym"
 TOP_LEVEL_ONLY = sorted([*(ROOT / "simulator").glob("*.py"), ROOT / "pretrained" / "__init__.py",
                          *(ROOT / "train" / name for name in ("config.py", "sampling.py", "warmstart.py",
                                                              "trainer.py", "real.py", "ship.py",
-                                                             "synthetic.py"))])
+                                                             "synthetic.py", "synthetic_push.py"))])
 
 
 def _function_imports(path: Path) -> list[str]:
@@ -49,3 +49,17 @@ def test_simulator_modules_import_each_other_without_a_cycle() -> None:
 
     for name in graph:
         visit(name, ())
+
+
+def test_the_planners_load_no_rl_stack() -> None:
+    """``import fignet_gym.agents`` (the planners) loads neither stable-baselines3 nor
+    TensorBoard; the PPO names it re-exports come from :mod:`fignet_gym.agents.ppo` on first use."""
+    import subprocess
+    import sys
+
+    code = ("import sys, fignet_gym.agents as a; "
+            "bad = [m for m in ('stable_baselines3', 'tensorboard', 'torch.utils.tensorboard') "
+            "if m in sys.modules]; assert not bad, bad; "
+            "from fignet_gym.agents import load_policy; import fignet_gym.agents.ppo as p; "
+            "assert load_policy is p.load_policy and 'stable_baselines3' in sys.modules")
+    subprocess.run([sys.executable, "-c", code], check=True)

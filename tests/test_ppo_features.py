@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import fignet_gym.envs  # noqa: F401  (registers the environments)
-from fignet_gym.agents.ppo_features import (
+from fignet_gym.agents.ppo.features import (
     N_FEATURES,
     ObservationTransform,
     ProgressShaping,
@@ -99,8 +99,8 @@ def test_transformed_env_and_policy_transform_agree() -> None:
 
 
 def test_run_with_features_and_shaping_saves_a_policy_that_acts_on_raw_observations(tmp_path) -> None:
-    from fignet_gym.agents import PPOConfig, RunConfig, evaluate_policy_on, load_run_policy, run_ppo
-    from fignet_gym.agents.ppo_eval import EVAL_SEED
+    from fignet_gym.agents.ppo import PPOConfig, RunConfig, evaluate_policy_on, load_run_policy, run_ppo
+    from fignet_gym.agents.ppo.eval import EVAL_SEED
 
     cfg = RunConfig(env_id=PUSH, dynamics="mujoco", observation="push-features", shaping=1.0,
                     eval_every=0, final_episodes=2,
@@ -115,7 +115,7 @@ def test_run_with_features_and_shaping_saves_a_policy_that_acts_on_raw_observati
 
 def test_success_bonus_is_added_on_successful_steps_only() -> None:
     """A run of the env from a hand-made near-goal state: the bonus lands on the success step."""
-    from fignet_gym.agents.ppo_features import SuccessBonus
+    from fignet_gym.agents.ppo.features import SuccessBonus
 
     vec = make_sb3_vec_env(PUSH, 2)
     bonus = SuccessBonus(vec, 5.0)

@@ -15,13 +15,13 @@ import torch
 from stable_baselines3 import PPO
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from fignet_gym.agents.ppo_config import PPOConfig, RunConfig
-from fignet_gym.agents.ppo_eval import EVAL_SEED
-from fignet_gym.agents.ppo_logging import read_csv
-from fignet_gym.agents.ppo_policy import NormalizedPolicy, load_run_policy
-from fignet_gym.agents.ppo_run import run_ppo
-from fignet_gym.agents.ppo_rundir import RunError
-from fignet_gym.agents.ppo_table import exploitation_gap, plot_curves, transfer_table
+from fignet_gym.agents.ppo.config import PPOConfig, RunConfig
+from fignet_gym.agents.ppo.eval import EVAL_SEED
+from fignet_gym.agents.ppo.logging import read_csv
+from fignet_gym.agents.ppo.policy import NormalizedPolicy, load_run_policy
+from fignet_gym.agents.ppo.run import run_ppo
+from fignet_gym.agents.ppo.rundir import RunError
+from fignet_gym.agents.ppo.table import exploitation_gap, plot_curves, transfer_table
 from fignet_gym.cli import main
 
 PUSH = "fignet_gym/Push-v0"

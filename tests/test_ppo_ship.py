@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import fignet_gym.agents.ppo_shipped as shipped
-from fignet_gym.agents import load_policy, load_run_policy
-from fignet_gym.agents.ppo_config import RunConfig
-from fignet_gym.agents.ppo_run import run_ppo
-from fignet_gym.agents.ppo_rundir import RunError
+import fignet_gym.agents.ppo.shipped as shipped
+from fignet_gym.agents.ppo import load_policy, load_run_policy
+from fignet_gym.agents.ppo.config import RunConfig
+from fignet_gym.agents.ppo.run import run_ppo
+from fignet_gym.agents.ppo.rundir import RunError
 from fignet_gym.cli import build_parser, main
 from fignet_gym.tools.ppo import config_from_args
 from fignet_gym.tools.ppo_ship import wilson_interval
@@ -152,8 +152,8 @@ def test_shipped_push_ppo_under_sb3_evaluate_policy_scores_as_its_own_evaluation
     from stable_baselines3.common.evaluation import evaluate_policy
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from fignet_gym.agents import evaluate_policy_on
-    from fignet_gym.agents.ppo_eval import EVAL_SEED
+    from fignet_gym.agents.ppo import evaluate_policy_on
+    from fignet_gym.agents.ppo.eval import EVAL_SEED
 
     policy = load_policy("push-ppo")
     assert (policy.env_id, policy.env_kwargs, policy.config.dynamics) == ("fignet_gym/Push-v1", {}, "fignet")

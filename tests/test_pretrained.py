@@ -53,7 +53,7 @@ def test_demo_quick_run_writes_its_summary(tmp_path) -> None:
     import gymnasium as gym
     import numpy as np
 
-    from fignet_gym.agents import load_policy
+    from fignet_gym.agents.ppo import load_policy
     from fignet_gym.tools.demo import DEMO_POLICY, DEMO_SEED, run_demo
 
     summary = run_demo(str(tmp_path), quick=True)

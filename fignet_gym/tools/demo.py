@@ -86,7 +86,8 @@ def _mpc(out: Path, episodes: int, quick: bool) -> dict[str, Any]:
     import torch
 
     import fignet_gym.envs  # noqa: F401  (registers the environments)
-    from fignet_gym.agents import PolicyAgent, load_policy, make_planner, run_episode
+    from fignet_gym.agents import PolicyAgent, make_planner, run_episode
+    from fignet_gym.agents.ppo import load_policy
     from fignet_gym.dynamics import DYNAMICS_LABELS, MujocoDynamics, make_dynamics
     from fignet_gym.tools.plan import _label, summarize
 

@@ -1,4 +1,4 @@
-"""``fignet-gym ppo`` and ``fignet-gym ppo-table``: arguments around :mod:`fignet_gym.agents.ppo_run`."""
+"""``fignet-gym ppo`` and ``fignet-gym ppo-table``: arguments around :mod:`fignet_gym.agents.ppo.run`."""
 
 from __future__ import annotations
 
@@ -6,10 +6,10 @@ import argparse
 import sys
 from pathlib import Path
 
-from fignet_gym.agents.ppo_config import ConfigError, PPOConfig, RunConfig
-from fignet_gym.agents.ppo_run import check_env_id, run_ppo
-from fignet_gym.agents.ppo_rundir import FINAL_EVAL, RunError
-from fignet_gym.agents.ppo_table import plot_curves, read_curves, read_final_eval, transfer_table
+from fignet_gym.agents.ppo.config import ConfigError, PPOConfig, RunConfig
+from fignet_gym.agents.ppo.run import check_env_id, run_ppo
+from fignet_gym.agents.ppo.rundir import FINAL_EVAL, RunError
+from fignet_gym.agents.ppo.table import plot_curves, read_curves, read_final_eval, transfer_table
 from fignet_gym.atomic import output_lock
 
 #: The ``fignet-gym ppo`` option of each config field (errors name the option the user typed).

@@ -22,12 +22,12 @@ from typing import Any
 
 import numpy as np
 
-from fignet_gym.agents.ppo_config import DYNAMICS, RunConfig
-from fignet_gym.agents.ppo_eval import EVAL_SEED
-from fignet_gym.agents.ppo_policy import load_run_policy
-from fignet_gym.agents.ppo_rundir import CONFIG, FINAL_EVAL, NORMALIZER, POLICY, RunError
-from fignet_gym.agents.ppo_shipped import policies_dir
-from fignet_gym.agents.ppo_table import read_curves, read_final_eval
+from fignet_gym.agents.ppo.config import DYNAMICS, RunConfig
+from fignet_gym.agents.ppo.eval import EVAL_SEED
+from fignet_gym.agents.ppo.policy import load_run_policy
+from fignet_gym.agents.ppo.rundir import CONFIG, FINAL_EVAL, NORMALIZER, POLICY, RunError
+from fignet_gym.agents.ppo.shipped import policies_dir
+from fignet_gym.agents.ppo.table import read_curves, read_final_eval
 from fignet_gym.dynamics import DYNAMICS_LABELS
 from fignet_gym.tools.ppo import OPTIONS, config_from_args
 
@@ -161,7 +161,7 @@ def policy_card(name: str, run: Path, cfg: RunConfig, final: dict[str, Any],
         "from stable_baselines3.common.evaluation import evaluate_policy",
         "",
         "import fignet_gym.envs  # registers the environments",
-        "from fignet_gym.agents import load_policy",
+        "from fignet_gym.agents.ppo import load_policy",
         "",
         f'policy = load_policy("{name}")  # SB3 predict on raw observations (normaliser inside)',
         'env = gym.make(policy.env_id, **policy.env_kwargs, dynamics="mujoco")',

@@ -15,7 +15,7 @@ A run folder holds::
     policy.zip, vecnormalize.pkl   the final policy and its normaliser
     final_eval.json      the final policy on both dynamics (``final_episodes`` episodes each)
 
-Nothing here knows how a run trains: :mod:`fignet_gym.agents.ppo_run` calls these functions.
+Nothing here knows how a run trains: :mod:`fignet_gym.agents.ppo.run` calls these functions.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from typing import Any
 
 import torch
 
-from fignet_gym.agents.ppo_config import RunConfig
+from fignet_gym.agents.ppo.config import RunConfig
 from fignet_gym.atomic import write_text
 
 CONFIG = "config.json"

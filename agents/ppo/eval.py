@@ -18,7 +18,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.type_aliases import PolicyPredictor
 
-from fignet_gym.agents.ppo_config import DYNAMICS, PUSH_ID, RunConfig
+from fignet_gym.agents.ppo.config import DYNAMICS, PUSH_ID, RunConfig
 from fignet_gym.dynamics import Dynamics
 from fignet_gym.envs.vector import BatchedVectorEnv
 

@@ -27,7 +27,7 @@ MAX_SEED = 2**32 - 1
 LOG_STD_RANGE = (-20.0, 2.0)
 #: Largest hidden layer: a policy for a 2-D action needs nothing near this.
 MAX_LAYER = 8192
-#: Observation kinds a run may give its policy (:mod:`~fignet_gym.agents.ppo_features`).
+#: Observation kinds a run may give its policy (:mod:`~fignet_gym.agents.ppo.features`).
 OBSERVATIONS = ("env", "push-features")
 #: Largest progress-shaping weight: beyond it the shaping dwarfs the env's own reward.
 MAX_SHAPING = 100.0
@@ -153,11 +153,11 @@ class RunConfig:
         checkpoint_every: save a resumable checkpoint every this many environment steps.
         observation: what the policy sees: ``"env"`` (the env's observation) or
             ``"push-features"`` (it and the pushing geometry,
-            :func:`~fignet_gym.agents.ppo_features.push_features`).
+            :func:`~fignet_gym.agents.ppo.features.push_features`).
         shaping: weight of the potential-based progress reward added during training
-            (:class:`~fignet_gym.agents.ppo_features.ProgressShaping`; 0: none).
+            (:class:`~fignet_gym.agents.ppo.features.ProgressShaping`; 0: none).
         success_bonus: extra reward of a successful step during training
-            (:class:`~fignet_gym.agents.ppo_features.SuccessBonus`; 0: none). Evaluation and the
+            (:class:`~fignet_gym.agents.ppo.features.SuccessBonus`; 0: none). Evaluation and the
             logged returns always use the env's own reward.
     """
 

@@ -12,13 +12,13 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecNormalize
 
-from fignet_gym.agents.ppo_config import RunConfig
-from fignet_gym.agents.ppo_eval import evaluate_both, summary
-from fignet_gym.agents.ppo_features import ObservationTransform
-from fignet_gym.agents.ppo_logging import CSVRows, pending_records
-from fignet_gym.agents.ppo_policy import NormalizedPolicy
-from fignet_gym.agents.ppo_rng import rng_state
-from fignet_gym.agents.ppo_rundir import MODEL, NORMALIZER, save_checkpoint
+from fignet_gym.agents.ppo.config import RunConfig
+from fignet_gym.agents.ppo.eval import evaluate_both, summary
+from fignet_gym.agents.ppo.features import ObservationTransform
+from fignet_gym.agents.ppo.logging import CSVRows, pending_records
+from fignet_gym.agents.ppo.policy import NormalizedPolicy
+from fignet_gym.agents.ppo.rng import rng_state
+from fignet_gym.agents.ppo.rundir import MODEL, NORMALIZER, save_checkpoint
 
 
 def write_checkpoint(root: Path, model: PPO, extra: Mapping[str, Any]) -> None:

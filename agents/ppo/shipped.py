@@ -13,8 +13,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from fignet_gym.agents.ppo_policy import NormalizedPolicy, load_run_policy
-from fignet_gym.agents.ppo_rundir import POLICY, RunError
+from fignet_gym.agents.ppo.policy import NormalizedPolicy, load_run_policy
+from fignet_gym.agents.ppo.rundir import POLICY, RunError
 from fignet_gym.pretrained import pretrained_dir
 
 #: Sub-folder of ``fignet_gym/pretrained/`` holding one folder per shipped policy.

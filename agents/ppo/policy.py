@@ -12,9 +12,9 @@ import numpy as np
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecNormalize
 
-from fignet_gym.agents.ppo_config import RunConfig
-from fignet_gym.agents.ppo_features import ObservationTransform
-from fignet_gym.agents.ppo_rundir import NORMALIZER, POLICY, RunError, saved_config
+from fignet_gym.agents.ppo.config import RunConfig
+from fignet_gym.agents.ppo.features import ObservationTransform
+from fignet_gym.agents.ppo.rundir import NORMALIZER, POLICY, RunError, saved_config
 
 
 class NormalizedPolicy:

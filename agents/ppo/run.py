@@ -4,8 +4,8 @@ The training environment is the batched vector env (:func:`~fignet_gym.envs.make
 one dynamics call steps every sub-environment) under ``VecMonitor`` (episode returns and lengths
 in the env's own reward) and ``VecNormalize`` (running mean/std of observations and of the
 discounted return: the reward PPO sees is the env's reward divided by one positive number, so the
-task is unchanged). The folder (:mod:`~fignet_gym.agents.ppo_rundir`) holds the config, the
-latest checkpoint, the logs (:mod:`~fignet_gym.agents.ppo_logging`) and the final evaluation.
+task is unchanged). The folder (:mod:`~fignet_gym.agents.ppo.rundir`) holds the config, the
+latest checkpoint, the logs (:mod:`~fignet_gym.agents.ppo.logging`) and the final evaluation.
 
 Checkpoints are taken between PPO iterations (after an update, before the next rollout), so all
 experience counted by the timestep counter has been trained on. A killed run resumed with
@@ -31,19 +31,19 @@ from gymnasium.envs.registration import load_env_creator
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-from fignet_gym.agents.ppo_callback import RunCallback, Stop
-from fignet_gym.agents.ppo_config import RunConfig
-from fignet_gym.agents.ppo_eval import evaluate_both, run_env_kwargs
-from fignet_gym.agents.ppo_features import (
+from fignet_gym.agents.ppo.callback import RunCallback, Stop
+from fignet_gym.agents.ppo.config import RunConfig
+from fignet_gym.agents.ppo.eval import evaluate_both, run_env_kwargs
+from fignet_gym.agents.ppo.features import (
     ObservationTransform,
     ProgressShaping,
     SuccessBonus,
     TransformedObservations,
 )
-from fignet_gym.agents.ppo_logging import CSVRows, make_logger, restore_records
-from fignet_gym.agents.ppo_policy import load_run_policy
-from fignet_gym.agents.ppo_rng import adapter, set_rng_state
-from fignet_gym.agents.ppo_rundir import (
+from fignet_gym.agents.ppo.logging import CSVRows, make_logger, restore_records
+from fignet_gym.agents.ppo.policy import load_run_policy
+from fignet_gym.agents.ppo.rng import adapter, set_rng_state
+from fignet_gym.agents.ppo.rundir import (
     CHECKPOINT,
     FINAL_EVAL,
     MODEL,
@@ -176,7 +176,7 @@ def run_ppo(
     """Train (or resume) a PPO run in ``out``, then evaluate its policy on both dynamics.
 
     Args:
-        out: run folder (layout in :mod:`~fignet_gym.agents.ppo_rundir`).
+        out: run folder (layout in :mod:`~fignet_gym.agents.ppo.rundir`).
         cfg: the run (default: ``RunConfig()``, the current Push version on MuJoCo); on resume it
             must equal the saved one except ``ppo.total_timesteps`` (a finished run can be
             extended; the budget may not fall below the steps already done).

@@ -15,8 +15,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from fignet_gym.agents.ppo_config import DYNAMICS
-from fignet_gym.agents.ppo_rundir import CONFIG, FINAL_EVAL, RunError
+from fignet_gym.agents.ppo.config import DYNAMICS
+from fignet_gym.agents.ppo.rundir import CONFIG, FINAL_EVAL, RunError
 
 #: Fields of each dynamics' report the table reads.
 REPORT_FIELDS = ("success_rate", "mean_return", "n_episodes")

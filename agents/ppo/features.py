@@ -26,7 +26,7 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 
-from fignet_gym.agents.ppo_config import OBSERVATIONS
+from fignet_gym.agents.ppo.config import OBSERVATIONS
 from fignet_gym.envs.tasks import wrap_angle
 
 #: Observation names this module reads (``PushEnv.observation_layout``): slices of the 19 values.
