@@ -9,6 +9,10 @@ TensorBoard; importing this package for the planners loads neither: the PPO name
 imported from :mod:`fignet_gym.agents.ppo` when first used.
 """
 
+from fignet_gym import check_same_install
+
+check_same_install(__file__, "agents")  # before anything else of this copy is imported
+
 from fignet_gym.agents.baselines import IdleAgent, RandomAgent
 from fignet_gym.agents.episode import run_episode
 from fignet_gym.agents.planners import (

@@ -14,6 +14,10 @@ The stable-baselines3 adapter lives in :mod:`fignet_gym.envs.sb3` and is importe
 when one of its names is used.
 """
 
+from fignet_gym import check_same_install
+
+check_same_install(__file__, "envs")  # before anything else of this copy is imported
+
 from typing import Any
 
 from fignet_gym.envs.base import MjDynamicsEnv

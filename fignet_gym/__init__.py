@@ -6,6 +6,7 @@ imported (:mod:`fignet_gym.registration`). Package layout: ``docs/architecture.m
 """
 
 import os as _os
+from pathlib import Path as _Path
 
 # MuJoCo picks its OpenGL backend when it is first imported: without a display, EGL renders
 # headless. Users who set MUJOCO_GL themselves keep their choice.
@@ -26,10 +27,28 @@ from fignet_gym.simulator import (  # noqa: E402
 )
 
 __all__ = [
-    "CheckpointError", "LearnedSimulator", "MeshOptions", "ObjectKind", "Scene",
+    "CheckpointError", "LearnedSimulator", "MeshOptions", "MixedInstallError", "ObjectKind", "Scene",
     "ShapeMatchError", "SimulatorConfig", "UnsupportedSceneError", "available_pretrained",
-    "load_pretrained",
+    "check_same_install", "load_pretrained",
 ]
 __version__ = "0.1.0"
+
+
+class MixedInstallError(ImportError):
+    """``fignet_gym`` and its ``envs`` / ``agents`` come from two different copies."""
+
+
+def check_same_install(module_file: str, name: str) -> None:
+    """``MixedInstallError`` (one line, with the fix) unless the ``fignet_gym.<name>`` package
+    at ``module_file`` belongs to the same copy as this ``fignet_gym``: beside it in a checkout
+    (``envs/``, ``agents/`` next to ``fignet_gym/``, an editable install) or inside it (an
+    installed wheel). A second checkout on ``PYTHONPATH`` otherwise mixes its core with the
+    installed tree's environments without a word."""
+    core = _Path(__file__).resolve().parent
+    pkg = _Path(module_file).resolve().parent
+    if pkg.parent not in (core, core.parent):
+        raise MixedInstallError(
+            f"fignet_gym comes from {core} but fignet_gym.{name} from {pkg}: two copies are on "
+            f"the path (check PYTHONPATH); install the one you want with `pip install -e <it>`")
 
 register_when_gymnasium_loads()

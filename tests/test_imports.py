@@ -63,3 +63,30 @@ def test_the_planners_load_no_rl_stack() -> None:
             "from fignet_gym.agents import load_policy; import fignet_gym.agents.ppo as p; "
             "assert load_policy is p.load_policy and 'stable_baselines3' in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_a_second_copy_on_the_path_is_refused_in_one_line(tmp_path: Path) -> None:
+    """A copy of the core first on ``PYTHONPATH`` with this checkout installed: ``fignet_gym``
+    comes from the copy, ``fignet_gym.envs`` / ``.agents`` from the installed tree. The import
+    says so (MixedInstallError naming both) instead of mixing them; the unit check accepts a
+    checkout's and a wheel's layout."""
+    import shutil
+    import subprocess
+    import sys
+
+    import fignet_gym
+
+    shutil.copytree(ROOT, tmp_path / "fignet_gym", ignore=shutil.ignore_patterns("*.pt", "*.zip",
+                                                                                "__pycache__"))
+    for name in ("envs", "agents"):
+        run = subprocess.run([sys.executable, "-c", f"import fignet_gym.{name}"], capture_output=True,
+                             cwd=tmp_path,
+                             text=True, env={**__import__("os").environ, "PYTHONPATH": str(tmp_path)})
+        assert run.returncode != 0
+        last = run.stderr.strip().splitlines()[-1]
+        assert last.startswith("fignet_gym.MixedInstallError:") and str(tmp_path) in last, last
+    core = Path(fignet_gym.__file__).resolve().parent
+    fignet_gym.check_same_install(str(core.parent / "envs" / "__init__.py"), "envs")  # a checkout
+    fignet_gym.check_same_install(str(core / "envs" / "__init__.py"), "envs")  # a wheel
+    with pytest.raises(fignet_gym.MixedInstallError, match="two copies"):
+        fignet_gym.check_same_install(str(tmp_path / "envs" / "__init__.py"), "envs")
