@@ -34,18 +34,30 @@ def user_error(err: BaseException) -> str | None:
 
 def run_command(func: Callable[[argparse.Namespace], int | None], args: argparse.Namespace) -> int:
     """Run a subcommand: a user error prints ``error: <file>: <what>`` and returns 2 (set
-    ``FIGNET_GYM_TRACEBACK=1`` for the traceback); anything else (a bug) propagates."""
-    try:
-        return int(func(args) or 0)
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return 130
-    except Exception as err:  # noqa: BLE001 - classified below, re-raised if not a user error
-        msg = user_error(err)
-        if msg is None or os.environ.get("FIGNET_GYM_TRACEBACK"):
-            raise
-        print(f"error: {msg}", file=sys.stderr)
-        return 2
+    ``FIGNET_GYM_TRACEBACK=1`` for the traceback); anything else (a bug) propagates. MuJoCo's
+    warnings are counted into one line at the end (stages that expect them, such as the contact
+    fit, summarise their own), never printed one by one nor written to ``MUJOCO_LOG.TXT``."""
+    # Deferred like every command's own imports: --help stays fast.
+    from fignet_gym.dynamics.mujoco import collect_warnings
+
+    with collect_warnings() as warned:
+        try:
+            return int(func(args) or 0)
+        except KeyboardInterrupt:
+            print("error: interrupted", file=sys.stderr)
+            return 130
+        except Exception as err:  # noqa: BLE001 - classified below, re-raised if not a user error
+            msg = user_error(err)
+            if msg is None or os.environ.get("FIGNET_GYM_TRACEBACK"):
+                raise
+            print(f"error: {msg}", file=sys.stderr)
+            return 2
+        finally:
+            if warned:
+                times = "once" if len(warned) == 1 else f"{len(warned)} times"
+                print(f"MuJoCo warned {times} (first: {warned[0]}); a simulation that "
+                      "went unstable holds its last finite poses and is scored as it is",
+                      file=sys.stderr)
 
 
 def _overrides(text: str | None) -> dict:

@@ -569,3 +569,26 @@ def test_the_table_orders_sizes_and_says_seconds_and_the_per_recording_view() ->
     assert table.index("| 8 |") < table.index("| 47 |")
     assert "frame 25 (0.50 s)" in table and "over the 11 recordings" in table
     assert "| FIGNet, 8 train | 4.00 | 6.00 | 0.50 [0.30, 1.20] | 0.40 [0.20, 1.10] |" in table
+
+
+def test_every_command_counts_mujocos_warnings_into_one_line(tmp_path: Path, monkeypatch, capsys) -> None:
+    """A command during which MuJoCo warns prints one summary line on stderr at the end, not
+    MuJoCo's own lines, and writes no MUJOCO_LOG.TXT in the working directory."""
+    import argparse
+
+    from fignet_gym.cli import run_command
+
+    def unstable(_: argparse.Namespace) -> int:
+        model = mujoco.MjModel.from_xml_string(
+            "<mujoco><worldbody><body><freejoint/><geom size='1'/></body></worldbody></mujoco>")
+        for _ in range(3):  # MuJoCo warns once per kind and MjData
+            data = mujoco.MjData(model)
+            data.qvel[:] = 1e30
+            mujoco.mj_step(model, data)
+        return 0
+
+    monkeypatch.chdir(tmp_path)
+    assert run_command(unstable, argparse.Namespace()) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("MuJoCo warned 3 times (first: Nan, Inf")
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
