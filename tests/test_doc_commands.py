@@ -61,6 +61,8 @@ def _small(argv: list[str]) -> list[str]:
         i += 1
     if out[0] == "sim2real":  # tiny fits and training (the last of a repeated option wins)
         out += ["--fit-evaluations", "3", "--fit-trajectories", "2", "--set", TINY_TRAINING]
+    if out[0] == "evaluate":
+        out += ["--videos", "0"]
     return out
 
 
@@ -76,5 +78,6 @@ def test_the_documented_real_push_commands_run_as_written(tmp_path: Path,
             assert main(small) == 0, f"failed as documented: fignet-gym {shlex.join(argv)}"
             ran.append(small[0])
     assert ran.count("sim2real") >= 3 and "import-mit" in ran and "check-mit" in ran
+    assert ran.count("evaluate") >= 3
     assert (tmp_path / "runs" / "s2r_abs" / "table.md").is_file()
     assert (tmp_path / "runs" / "s2r_abs_scratch" / "results.json").is_file()
