@@ -121,6 +121,25 @@ def _sim2real(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sim2real_compare(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from fignet_gym.train.sim2real_report import compare_runs
+
+    labels = args.labels or [Path(r).name for r in args.runs]
+    if len(labels) != len(args.runs):
+        raise ValueError(f"--labels: {len(labels)} labels for {len(args.runs)} runs")
+    runs = {}
+    for label, run in zip(labels, args.runs, strict=True):
+        path = Path(run) / "results.json"
+        if not path.is_file():
+            raise ValueError(f"{run}: no results.json (a finished sim2real run folder?)")
+        runs[label] = json.loads(path.read_text())
+    print(compare_runs(runs, Path(args.out)))
+    print(f"wrote {Path(args.out) / 'compare.md'} and {Path(args.out) / 'compare.png'}")
+    return 0
+
+
 def _bench(args: argparse.Namespace) -> int:
     from fignet_gym.tools.bench import run
 
@@ -363,6 +382,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="--pretrain on pushes: the fitted model(s) the synthetic pushes come from "
                         "(both: half each); pretraining starts from --init (default: %(default)s)")
     r.set_defaults(func=_sim2real)
+
+    c = sub.add_parser("sim2real-compare", help="several sim2real runs of one split side by side "
+                       "(FIGNet recipes against the analytic models): table and plot")
+    c.add_argument("runs", nargs="+", help="sim2real run folders (each with results.json)")
+    c.add_argument("--labels", nargs="+", help="one label per run (default: the folder names)")
+    c.add_argument("--out", required=True, help="folder for compare.md and compare.png")
+    c.set_defaults(func=_sim2real_compare)
 
     register_data(sub)
     return p

@@ -592,3 +592,49 @@ def test_every_command_counts_mujocos_warnings_into_one_line(tmp_path: Path, mon
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("MuJoCo warned 3 times (first: Nan, Inf")
     assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+
+
+def test_compare_runs_puts_arms_side_by_side_and_refuses_other_splits(tmp_path: Path, capsys) -> None:
+    """``sim2real-compare``: every arm's sizes under the analytic rows, windows and per push, a
+    plot; runs of another split are refused in one line."""
+    def m(tr: float, n: int | None = None) -> dict:
+        out = {"translation_rmse_final": tr, "rotation_deg_final": 1000 * tr, "horizon_step": 25,
+               "trajectories": 22, "seconds": 0.5}
+        if n is not None:
+            out.update(training_trajectories=n, vs_fitted_mujoco={
+                "translation_rmse": [tr / 0.001, 0.1, 9.0], "rotation_deg": [tr / 0.001, 0.1, 9.0]})
+        return out
+
+    def rec(tr: float) -> dict:
+        return {"translation_rmse_final": 2 * tr, "rotation_deg_final": 2000 * tr,
+                "vs": {"translation_rmse": [2.0, 1.0, 3.0], "rotation_deg": [2.0, 1.0, 3.0]}}
+
+    def run(arm: float) -> dict:
+        return {"split": {"train": 34, "valid": 11, "test": 11}, "mujoco_fitted": m(0.001),
+                "mujoco_nominal": {**m(0.002), "vs_fitted_mujoco": {"translation_rmse": [2, 1, 3],
+                                                                    "rotation_deg": [2, 1, 3]}},
+                "fignet": {"all": m(arm, 47), "8": m(2 * arm, 8)},
+                "per_recording": {"MuJoCo, fitted": rec(0.001), "FIGNet, 8 train": rec(2 * arm),
+                                  "FIGNet, 47 train": rec(arm)}}
+
+    for label, arm in (("a", 0.003), ("b", 0.0015)):
+        (tmp_path / label).mkdir()
+        (tmp_path / label / "results.json").write_text(json.dumps(run(arm)))
+    out = tmp_path / "cmp"
+    assert main(["sim2real-compare", str(tmp_path / "a"), str(tmp_path / "b"), "--labels",
+                 "from push", "prior", "--out", str(out)]) == 0
+    table = (out / "compare.md").read_text()
+    assert (out / "compare.png").stat().st_size > 0
+    rows = [[c.strip() for c in r.strip("|").split("|")] for r in table.splitlines()
+            if r.startswith("| ")][1:]
+    assert [r[:2] for r in rows] == [["MuJoCo, nominal", ""], ["MuJoCo, fitted", ""],
+                                     ["from push", "8"], ["from push", "47"], ["prior", "8"],
+                                     ["prior", "47"]]
+    assert "| prior | 47 | 1.50 | 1.50 | 1.50 [0.10, 9.00] | 1.50 [0.10, 9.00] | 3.00 | 3.00 |" in table
+    other = run(0.003)
+    other["split"] = {"train": 30, "valid": 11, "test": 15}
+    (tmp_path / "c").mkdir()
+    (tmp_path / "c" / "results.json").write_text(json.dumps(other))
+    capsys.readouterr()
+    assert main(["sim2real-compare", str(tmp_path / "a"), str(tmp_path / "c"), "--out", str(out)]) == 2
+    assert "scored on another split" in capsys.readouterr().err

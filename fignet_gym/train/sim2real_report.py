@@ -122,6 +122,101 @@ def plot_sizes(results: dict[str, Any], path: Path) -> None:
     plt.close(fig)
 
 
+def compare_runs(runs: dict[str, dict[str, Any]], out: Path) -> str:
+    """Several ``sim2real`` runs on the same split (``{label: results.json}``; FIGNet recipes
+    side by side): a Markdown table of every arm and size, over windows and per recording, with
+    ratios to fitted MuJoCo, and ``compare.png`` (error against size, the analytic models as
+    lines); writes ``compare.md`` and returns the table. ``ValueError`` if the runs were scored
+    on different test splits (their fitted MuJoCo errors differ)."""
+    first = next(iter(runs.values()))
+    ref = first["mujoco_fitted"]
+    for label, r in runs.items():
+        if (r["mujoco_fitted"]["trajectories"], r["split"]) != (ref["trajectories"], first["split"]):
+            raise ValueError(f"{label}: scored on another split ({r['split']} against "
+                             f"{first['split']}): compare runs of one --data and --seed")
+    h, sec = ref["horizon_step"], ref.get("seconds")
+    at = f"frame {h} ({sec:.2f} s)" if sec is not None else f"frame {h}"
+    per = first.get("per_recording", {})
+    lines = [f"Medians at {at} over the {ref['trajectories']} test trajectories (windows) and, "
+             "per recording, over each push's windows averaged; ratio to fitted MuJoCo with its "
+             "paired bootstrap 95% interval (recordings resampled).", "",
+             "| model | train | windows: transl. (mm) | rot. (deg) | ratio transl. | ratio rot. "
+             "| per push: transl. (mm) | rot. (deg) | ratio transl. | ratio rot. |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+
+    def cells(win: dict[str, Any], vs: dict[str, Any] | None, rec: dict[str, Any] | None) -> str:
+        out = [f"{1e3 * win['translation_rmse_final']:.2f}", f"{win['rotation_deg_final']:.2f}"]
+        out += ([f"{vs[k][0]:.2f} [{vs[k][1]:.2f}, {vs[k][2]:.2f}]" for k in ("translation_rmse",
+                                                                            "rotation_deg")]
+                if vs else ["1", "1"])
+        if rec is not None:
+            out += [f"{1e3 * rec['translation_rmse_final']:.2f}", f"{rec['rotation_deg_final']:.2f}"]
+            out += [f"{rec['vs'][k][0]:.2f} [{rec['vs'][k][1]:.2f}, {rec['vs'][k][2]:.2f}]"
+                    for k in ("translation_rmse", "rotation_deg")]
+        else:
+            out += ["", "", "", ""]
+        return " | ".join(out)
+
+    analytic = [("MuJoCo, nominal", "mujoco_nominal"), ("MuJoCo, fitted", "mujoco_fitted"),
+                ("limit surface, fitted", "limit_surface")]
+    for name, key in analytic:
+        if key in first:
+            vs = first[key].get("vs_fitted_mujoco") if key != "mujoco_fitted" else None
+            lines.append(f"| {name} | | {cells(first[key], vs, per.get(name))} |")
+    for label, r in runs.items():
+        rec = r.get("per_recording", {})
+        for f in sorted(r["fignet"].values(), key=lambda v: v["training_trajectories"]):
+            n = f["training_trajectories"]
+            lines.append(f"| {label} | {n} | "
+                         f"{cells(f, f['vs_fitted_mujoco'], rec.get(f'FIGNet, {n} train'))} |")
+    table = "\n".join(lines)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "compare.md").write_text(table + "\n")
+    _plot_compare(runs, out / "compare.png")
+    return table
+
+
+def _plot_compare(runs: dict[str, dict[str, Any]], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    first = next(iter(runs.values()))
+    views = [("windows", lambda r, key: r.get(key), "translation_rmse_final", "translation"),
+             ("windows", lambda r, key: r.get(key), "rotation_deg_final", "rotation")]
+    if "per_recording" in first:
+        views += [("per push", lambda r, key: r.get("per_recording", {}).get(key),
+                   "translation_rmse_final", "translation"),
+                  ("per push", lambda r, key: r.get("per_recording", {}).get(key),
+                   "rotation_deg_final", "rotation")]
+    fig, axes = plt.subplots(1, len(views), figsize=(4 * len(views), 3.4))
+    names = {"mujoco_nominal": "MuJoCo, nominal", "mujoco_fitted": "MuJoCo, fitted",
+             "limit_surface": "limit surface, fitted"}
+    styles = {"mujoco_nominal": ("gray", ":"), "mujoco_fitted": ("k", "--"),
+              "limit_surface": ("tab:red", "-.")}
+    for ax, (view, get, q, title) in zip(axes, views, strict=True):
+        unit = 1e3 if q.startswith("translation") else 1.0
+        for label, r in runs.items():
+            pts = sorted((f["training_trajectories"],
+                          get(r, f"FIGNet, {f['training_trajectories']} train") if view != "windows"
+                          else f) for f in r["fignet"].values())
+            pts = [(n, v) for n, v in pts if v is not None]
+            ax.plot([n for n, _ in pts], [unit * v[q] for _, v in pts], "o-", label=label)
+        for key, name in names.items():
+            v = get(first, name) if view != "windows" else first.get(key)
+            if v is not None:
+                color, style = styles[key]
+                ax.axhline(unit * v[q], color=color, linestyle=style, label=name)
+        ax.set(xscale="log", xlabel="training trajectories (windows)",
+               ylabel="mm" if unit > 1 else "deg", title=f"{title}, {view}")
+        ax.grid(alpha=0.3, which="both")
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
 def summary_lines(results: dict[str, Any]) -> list[str]:
     """Short text of the fit (for logs)."""
     p = results["fit"]["params"]
