@@ -38,9 +38,15 @@ def run_command(func: Callable[[argparse.Namespace], int | None], args: argparse
     warnings are counted into one line at the end (stages that expect them, such as the contact
     fit, summarise their own), never printed one by one nor written to ``MUJOCO_LOG.TXT``."""
     # Deferred like every command's own imports: --help stays fast.
+    import warnings
+
     from fignet_gym.dynamics.mujoco import collect_warnings
 
-    with collect_warnings() as warned:
+    def one_line(message: Warning | str, *_: object, **__: object) -> None:
+        print(f"warning: {message}", file=sys.stderr)  # a user reads the fix, not our source line
+
+    with collect_warnings() as warned, warnings.catch_warnings():
+        warnings.showwarning = one_line
         try:
             return int(func(args) or 0)
         except KeyboardInterrupt:

@@ -401,3 +401,14 @@ def test_dt_refusal_of_mit_data_names_the_import_flag(pushes: list) -> None:
     mit = [replace(t, metadata={**t.metadata, "source": "mit_pushing/h5"}) for t in pushes]
     with pytest.raises(ValueError, match=r"re-import with `fignet-gym import-mit \.\.\. --dt 0\.01`"):
         rollout_metrics(zero_simulator("push", dt=0.01), mit, horizon=10)
+
+
+def test_no_per_recording_view_where_every_trajectory_is_its_own_recording(tmp_path: Path) -> None:
+    """Generated trajectories carry no recording key: each is its own, so ``evaluate`` adds no
+    per-recording view (one would be the same medians under another name)."""
+    data = tmp_path / "p.h5"
+    write_trajectories(data, list(iter_trajectories("push", 3, seed=2)))
+    sim = zero_simulator("push", dt=0.02)
+    save(sim, tmp_path / "z.pt")
+    res = evaluate(str(tmp_path / "z.pt"), str(data), str(tmp_path / "e"), horizon=25, videos=0)
+    assert "per_recording" not in res

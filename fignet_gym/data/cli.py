@@ -104,6 +104,10 @@ def _generate(args: argparse.Namespace) -> int:
     from fignet_gym.data.generate import TossConfig, default_config, generate
     from fignet_gym.simulator.scene import MeshOptions
 
+    if args.kind == "scene":
+        return _generate_scene(args)
+    if args.mjcf is not None:
+        raise ValueError(f"--mjcf is for `generate scene`, not {args.kind}")
     cfg = default_config(args.kind)
     if isinstance(cfg, TossConfig):
         mo = MeshOptions(sphere_subdivisions=args.sphere_subdivisions,
@@ -114,11 +118,35 @@ def _generate(args: argparse.Namespace) -> int:
         cfg = replace(cfg, duration=args.duration)
     if args.substeps is not None:
         cfg = replace(cfg, substeps=args.substeps)
-    cfg = replace(cfg, cone=args.cone)
+    cfg = replace(cfg, cone=args.cone or DEFAULT_CONE)
     with _writing(args.out, args.force):
         stats = generate(args.kind, args.num, args.seed, args.out, workers=args.workers,
                          config=cfg, progress=not args.no_progress)
     print(f"wrote {stats['num']} {args.kind} trajectories to {args.out} in "
+          f"{stats['seconds']:.1f} s ({stats['traj_per_s']:.2f} traj/s, {args.workers} workers)")
+    return 0
+
+
+def _generate_scene(args: argparse.Namespace) -> int:
+    from fignet_gym.data.generate import generate
+    from fignet_gym.data.scene_generator import SceneConfig
+
+    if args.mjcf is None:
+        raise ValueError("generate scene: pass the scene's MJCF (--mjcf FILE)")
+    if args.cone is not None:
+        raise ValueError("generate scene keeps the scene's own friction cone: set <option "
+                         "cone=...> in the MJCF instead of --cone")
+    extra = {k: v for k, v in (("duration", args.duration), ("dt", args.dt), ("target", args.target),
+                               ("speed", args.speed and tuple(args.speed)),
+                               ("offset", args.offset and tuple(args.offset)),
+                               ("position_jitter", args.position_jitter),
+                               ("yaw_range", args.yaw_range), ("segments", args.segments))
+             if v is not None}
+    cfg = SceneConfig.from_file(args.mjcf, **extra)
+    with _writing(args.out, args.force):
+        stats = generate("scene", args.num, args.seed, args.out, workers=args.workers, config=cfg,
+                         progress=not args.no_progress)
+    print(f"wrote {stats['num']} trajectories of {args.mjcf} to {args.out} in "
           f"{stats['seconds']:.1f} s ({stats['traj_per_s']:.2f} traj/s, {args.workers} workers)")
     return 0
 
@@ -286,9 +314,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="seconds per trajectory (default: 1.0 push, 2.0 toss)")
     g.add_argument("--substeps", type=int_at_least(1), default=None,
                    help="MuJoCo steps of 2 ms per stored pose (default 10: dt = 0.02 s)")
-    g.add_argument("--cone", choices=CONES, default=DEFAULT_CONE,
+    g.add_argument("--cone", choices=CONES, default=None,
                    help="MuJoCo friction cone (default elliptic: isotropic friction; pyramidal: "
-                        "the data of Push-v0/v1, Toss-v0 and the first shipped models)")
+                        "the data of Push-v0/v1, Toss-v0 and the first shipped models); a scene "
+                        "keeps its own")
     g.add_argument("--sphere-subdivisions", type=int_at_least(0), default=1,
                    help="toss: icosphere level of spheres (1: 42 nodes)")
     g.add_argument("--cylinder-sections", type=int_at_least(3), default=12,
@@ -296,6 +325,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     g.add_argument("--box-subdivisions", type=int_at_least(0), default=0,
                    help="toss: cube subdivisions (0: 8 corner nodes)")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
+    sc = g.add_argument_group("scene (a user's MJCF: free bodies pushed by mocap bodies; "
+                              "docs/data.md)")
+    sc.add_argument("--mjcf", default=None, help="the scene's MJCF file")
+    sc.add_argument("--dt", type=positive_float, default=None,
+                    help="learned step, a multiple of the MJCF's timestep (default 0.02 s)")
+    sc.add_argument("--target", default=None,
+                    help="free body every stroke aims at (default: one drawn per stroke)")
+    sc.add_argument("--speed", type=positive_float, nargs=2, metavar=("MIN", "MAX"), default=None,
+                    help="stroke speed range, m/s (default 0.05 0.15)")
+    sc.add_argument("--offset", type=float, nargs=2, metavar=("MIN", "MAX"), default=None,
+                    help="lateral offset of a stroke from the target's centre, m (default -0.02 0.02)")
+    sc.add_argument("--position-jitter", type=nonnegative_float, default=None,
+                    help="free bodies' start: horizontal shift up to this, m (default 0)")
+    sc.add_argument("--yaw-range", type=nonnegative_float, default=None,
+                    help="free bodies' start: heading turned by up to this, rad (default pi)")
+    sc.add_argument("--segments", type=int_at_least(1), default=None,
+                    help="straight pieces per stroke (default 1)")
     g.set_defaults(func=_guarded(_generate))
 
     s = subparsers.add_parser("show", help="render a stored trajectory to MP4 or GIF")

@@ -24,9 +24,12 @@ from tqdm import tqdm
 from fignet_gym.data.format import Trajectory, TrajectoryWriter
 from fignet_gym.data.generator_base import GENERATED_SOURCE, GENERATOR_VERSION, GenerationError
 from fignet_gym.data.push_generator import PushConfig, generate_push, simulate_push, tip_position
+from fignet_gym.data.scene_generator import SceneConfig, check_scene, generate_scene, simulate_scene
 from fignet_gym.data.toss_generator import TossConfig, generate_toss, random_quaternion, simulate_toss
 
-KINDS = ("push", "toss-simple", "toss-complex")
+KINDS = ("push", "toss-simple", "toss-complex", "scene")
+#: A generator's configuration: the shipped kinds' or a user's scene (``SceneConfig.from_file``).
+Config = PushConfig | TossConfig | SceneConfig
 
 
 def default_config(kind: str) -> PushConfig | TossConfig:
@@ -37,6 +40,8 @@ def default_config(kind: str) -> PushConfig | TossConfig:
         return TossConfig()
     if kind == "toss-complex":
         return TossConfig(complex=True)
+    if kind == "scene":
+        raise ValueError("generate scene: pass the scene's MJCF (--mjcf FILE)")
     raise ValueError(f"unknown generator kind {kind!r}; valid: {', '.join(KINDS)}")
 
 
@@ -72,17 +77,22 @@ def resimulate(traj: Trajectory, position_noise: float = 0.0, at_pose: int = 0, 
     substeps = int(traj.metadata["substeps"])
     if kind == "push":
         poses, _ = simulate_push(traj.mjcf, traj.metadata, traj.num_steps, substeps, nudge)
+    elif kind == "scene":
+        poses, _ = simulate_scene(traj.mjcf, traj.metadata, traj.num_steps, substeps, nudge)
     else:
         poses, _ = simulate_toss(traj.mjcf, traj.num_steps, substeps, nudge)
     return poses
 
 
-def _one(task: tuple[str, PushConfig | TossConfig, int, int]) -> Trajectory:
+def _one(task: tuple[str, Config, int, int]) -> Trajectory:
     kind, cfg, seed, index = task
     # hash(seed, index): the stream of trajectory `index` does not depend on the others
     rng = np.random.default_rng(np.random.SeedSequence([seed, index]))
     try:
-        traj = generate_push(rng, cfg) if kind == "push" else generate_toss(rng, cfg)
+        if isinstance(cfg, SceneConfig):
+            traj = generate_scene(rng, cfg)
+        else:
+            traj = generate_push(rng, cfg) if kind == "push" else generate_toss(rng, cfg)
     except GenerationError as err:
         raise GenerationError(f"{kind} seed {seed} index {index}: {err}") from None
     traj.name = f"{kind}-s{seed}-{index:06d}"
@@ -98,7 +108,7 @@ _THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
 
 
 def iter_trajectories(kind: str, num: int, seed: int, workers: int = 1,
-                      config: PushConfig | TossConfig | None = None) -> Iterator[Trajectory]:
+                      config: Config | None = None) -> Iterator[Trajectory]:
     """Yield trajectories ``0 .. num-1`` in order (parallel over ``workers`` processes)."""
     if seed < 0:
         raise ValueError(f"seed must be non-negative, got {seed}")
@@ -123,7 +133,7 @@ def iter_trajectories(kind: str, num: int, seed: int, workers: int = 1,
 
 
 def generate(kind: str, num: int, seed: int, out: str | os.PathLike, workers: int = 1,
-             config: PushConfig | TossConfig | None = None, progress: bool = True,
+             config: Config | None = None, progress: bool = True,
              ) -> dict[str, float]:
     """Generate ``num`` trajectories of ``kind`` into ``out`` (atomic); returns timing stats."""
     if isinstance(num, bool) or not isinstance(num, int) or num < 1:
@@ -133,6 +143,8 @@ def generate(kind: str, num: int, seed: int, out: str | os.PathLike, workers: in
     cfg = config or default_config(kind)
     if not (math.isfinite(cfg.duration) and cfg.duration > 0):
         raise ValueError(f"duration must be a finite number of seconds > 0, got {cfg.duration!r}")
+    if isinstance(cfg, SceneConfig):
+        check_scene(cfg)  # refusals and the cone warning once, before any worker starts
     meta = {"kind": kind, "seed": seed, "num": num, "generator_version": GENERATOR_VERSION,
             "mujoco_version": mujoco.__version__, "config": _jsonable(dataclasses.asdict(cfg))}
     start = time.perf_counter()
@@ -157,7 +169,8 @@ def _jsonable(x: Any) -> Any:
 
 
 __all__ = [
-    "GENERATOR_VERSION", "KINDS", "GenerationError", "PushConfig", "TossConfig", "default_config",
+    "GENERATOR_VERSION", "KINDS", "Config", "GenerationError", "PushConfig", "SceneConfig", "TossConfig",
+    "default_config",
     "generate", "generate_push", "generate_toss", "iter_trajectories", "resimulate", "simulate_push",
     "random_quaternion", "simulate_toss", "tip_position",
 ]

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from fignet_gym.data.format import Trajectory, build_scene, load_trajectories
-from fignet_gym.data.split import trajectory_groups
+from fignet_gym.data.split import group_members, trajectory_groups
 from fignet_gym.dynamics.contact_params import SHIPPED_PREFIX, ContactParams, fit_path
 from fignet_gym.dynamics.limit_surface import LS_PREFIX, load_limit_surface
 from fignet_gym.dynamics.mujoco import MujocoDynamics, collect_warnings, unstable_summary
@@ -195,7 +195,8 @@ def evaluate(checkpoint: str, data: str, out: str, num: int | None = None,
         res["against"] = {**who, "ratios": paired_ratios(res, ref),
                           **{k: ref[k] for k in ("translation_rmse_final", "rotation_deg_final",
                                                  "translation_rmse_last", "rotation_deg_last")}}
-    if len(set(trajectory_groups(trajs))) < len(trajs):
+    groups = trajectory_groups(trajs)
+    if len(group_members(len(trajs), groups)) < len(trajs):  # None: a recording of its own
         res["per_recording"] = per_recording(res, ref if against is not None else None)
         if against is not None:
             res["against"]["per_recording"] = per_recording(ref)

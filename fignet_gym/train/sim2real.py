@@ -43,7 +43,7 @@ from typing import Any
 
 from fignet_gym.atomic import write_text
 from fignet_gym.data.guards import check_single_scene_type
-from fignet_gym.data.split import DEFAULT_FRACTIONS, file_split, write_split
+from fignet_gym.data.split import DEFAULT_FRACTIONS, file_split, group_members, write_split
 from fignet_gym.train.sim2real_report import format_table, headline, plot_sizes, summary_lines
 
 TrainFn = Callable[[Path, Path, "int | None", Path], Path]
@@ -400,7 +400,8 @@ def run_sim2real(
               **({"limit surface, fitted": extra["limit_surface"]} if "limit_surface" in extra else {}),
               **{f"FIGNet, {v['training_trajectories']} train": v
                  for v in sorted(learned.values(), key=lambda v: v["training_trajectories"])}}
-    if len(set(fitted.get("groups_final") or [])) < fitted["horizon_trajectories"]:
+    if len(group_members(fitted["horizon_trajectories"], fitted.get("groups_final"))) < \
+            fitted["horizon_trajectories"]:
         # Several windows per recording (long real pushes): each recording counts once too.
         from fignet_gym.train.stats import per_recording
 
