@@ -123,7 +123,8 @@ def _sim2real(args: argparse.Namespace) -> int:
                      fit_evaluations=args.fit_evaluations, fit_trajectories=args.fit_trajectories,
                      fignet=not args.no_fignet, pretrain=args.pretrain, config=args.config,
                      budget=args.budget, overrides=overrides, init=args.init,
-                     polish=not args.no_polish, prior=args.prior)
+                     polish=not args.no_polish, prior=args.prior,
+                     pretrain_budget=args.pretrain_budget)
     return 0
 
 
@@ -387,6 +388,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--prior", choices=PRIORS, default="mujoco",
                    help="--pretrain on pushes: the fitted model(s) the synthetic pushes come from "
                         "(both: half each); pretraining starts from --init (default: %(default)s)")
+    r.add_argument("--pretrain-budget", type=int_at_least(1), default=None, metavar="STEPS",
+                   help="--pretrain: optimiser steps on the synthetic data (default: 2000 for "
+                        "pushes, 8000 for tosses)")
     r.set_defaults(func=_sim2real)
 
     c = sub.add_parser("sim2real-compare", help="several sim2real runs of one split side by side "

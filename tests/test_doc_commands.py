@@ -20,7 +20,8 @@ SAMPLE = Path(__file__).parent / "data" / "mit_sample"
 SECTIONS = ("## Real pushes (MIT Pushing): import protocol and geometry",
             "## Real pushes (MIT Pushing on ABS)", "## A stand-in pushing set")
 #: Budgets swapped for tiny ones (option -> value); every other option stays as written.
-SMALL = {"--budget": "2", "--num": "8", "--fit-evaluations": "3", "--fit-trajectories": "2"}
+SMALL = {"--budget": "2", "--num": "8", "--fit-evaluations": "3", "--fit-trajectories": "2",
+         "--pretrain": "4", "--pretrain-budget": "2"}
 TINY_TRAINING = ('{"training.valid_every": 1, "training.batch_size": 1, '
                  '"training.valid_trajectories": 1}')
 
@@ -77,7 +78,8 @@ def test_the_documented_real_push_commands_run_as_written(tmp_path: Path,
             small = _small(argv)
             assert main(small) == 0, f"failed as documented: fignet-gym {shlex.join(argv)}"
             ran.append(small[0])
-    assert ran.count("sim2real") >= 3 and "import-mit" in ran and "check-mit" in ran
+    assert ran.count("sim2real") >= 4 and "import-mit" in ran and "check-mit" in ran
+    assert "sim2real-compare" in ran and (tmp_path / "runs" / "s2r_abs_compare" / "compare.md").is_file()
     assert ran.count("evaluate") >= 3
     assert (tmp_path / "runs" / "s2r_abs" / "table.md").is_file()
     assert (tmp_path / "runs" / "s2r_abs_scratch" / "results.json").is_file()

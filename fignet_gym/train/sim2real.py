@@ -246,12 +246,13 @@ def run_sim2real(
     train_fn: TrainFn | None = None, fignet: bool = True, base_params: Any = None,
     pretrain: int = 0, config: str = "cube-real", budget: int | None = None,
     overrides: dict[str, Any] | None = None, init: str | None = None, polish: bool = True,
-    prior: str = "mujoco",
+    prior: str = "mujoco", pretrain_budget: int | None = None,
 ) -> dict[str, Any]:
     """Run every stage (see the module docstring) and return the results dict.
 
     ``pretrain``: synthetic tosses or pushes to pretrain on (0: none), pushes drawn from
-    ``prior`` (:data:`PRIORS`) and pretrained from ``init``. ``train_fn`` trains each size;
+    ``prior`` (:data:`PRIORS`) and pretrained from ``init`` for ``pretrain_budget`` optimiser
+    steps (pushes; default :data:`PUSH_PRETRAIN_STEPS`). ``train_fn`` trains each size;
     by default :func:`default_train` with ``config``, ``budget``, ``overrides`` and ``init``, or
     with ``pretrain`` a fine-tuning of :func:`pretrain_checkpoint` (:data:`FINETUNE_OVERRIDES`).
     ``config`` and ``overrides`` are also the pretraining's recipe. ``polish``: polish the
@@ -277,9 +278,10 @@ def run_sim2real(
                "fit_trajectories": fit_trajectories, "pretrain": pretrain, "polish": polish}
     if pretrain:
         run_cfg["prior"] = prior
+        run_cfg["pretrain_budget"] = pretrain_budget  # None: PUSH_PRETRAIN_STEPS / PRETRAIN_STEPS
     old = _read(config_path)
     # Runs from before a key existed ran with its old behaviour (no pretraining, no polish).
-    absent = {"pretrain": 0, "polish": False, "prior": "mujoco"}
+    absent = {"pretrain": 0, "polish": False, "prior": "mujoco", "pretrain_budget": None}
     then = {k: old.get(k, absent.get(k)) for k in run_cfg} if old is not None else run_cfg
     changed = [f"{k} {then[k]!r} (now {v!r})" for k, v in run_cfg.items() if then[k] != v]
     if changed:
@@ -349,7 +351,7 @@ def run_sim2real(
         info = _pretrain(train[:k0], valid, split_dir / "valid.h5", out / "pretrain", pretrain,
                          config=config, overrides=overrides, fit_evaluations=fit_evaluations,
                          fit_trajectories=fit_trajectories, given=given, horizon=horizon, seed=seed,
-                         prior=prior, init=init)
+                         prior=prior, init=init, budget=pretrain_budget)
         stages["pretrain"] = info
         cpu_hours["pretrain"] = info["cpu_hours"]
     learned: dict[str, Any] = {}
@@ -514,7 +516,7 @@ def _pretrain(train: list, valid: list, valid_file: Path, out: Path, num: int, *
         steps = budget or PUSH_PRETRAIN_STEPS
     else:
         sets = {"simulator.gravity": (0.0, 0.0, free_flight_gravity(train)), **(overrides or {})}
-        steps = PRETRAIN_STEPS
+        steps = budget or PRETRAIN_STEPS
     best = train_on_split(synth, valid_file, None, out / "run", steps, config=config,
                           overrides=sets, seed=seed, init=init)
     done = json.loads((out / "run" / "done.json").read_text())
