@@ -1,4 +1,5 @@
-"""``RealPush-v0``: :class:`~fignet_gym.envs.push.PushEnv`'s task on dynamics fitted to real pushes.
+"""``RealPush-v1`` (and ``-v0``): :class:`~fignet_gym.envs.push.PushEnv`'s task on dynamics fitted
+to real pushes.
 
 The object is one of the MIT Pushing objects recorded on ABS (the five of the shipped real
 pushes), and both backends come from those recordings: ``dynamics="fignet"`` is ``push-real``
@@ -58,16 +59,21 @@ class RealPushEnv(PushEnv):
     | argument | default | meaning |
     |---|---|---|
     | dynamics | ``"mujoco"`` | ``"mujoco"`` (fitted), ``"fignet"`` (``push-real``) or a ``Dynamics`` |
-    | checkpoint | ``None`` | ``"fignet"``: default ``push-real`` |
+    | checkpoint | ``None`` | ``"fignet"``: default ``learned`` |
+    | learned | ``"push-real"`` | the default learned model (``RealPush-v0``: ``push-real-v0``) |
     | shape | ``"rect1"`` | one of :data:`REAL_SHAPES` |
     | mujoco_params | ``None`` | fitted parameters (JSON path or dict; default: the shipped fit) |
 
     One step is 0.02 s whatever the backend (MuJoCo: the fit's substeps per step).
+
+    Version History: v1 steps the ``push-real`` of issue 39 (pretrained on pushes of the fitted
+    MuJoCo and limit surface); v0 the first one (``push-real-v0``). The MuJoCo backend is the
+    same fit in both.
     """
 
     def __init__(self, dynamics: str | Dynamics = "mujoco", checkpoint: Any = None,
                  shape: str = "rect1", mujoco_params: str | os.PathLike | dict[str, Any] | None = None,
-                 **kwargs: Any) -> None:
+                 learned: str = "push-real", **kwargs: Any) -> None:
         if shape not in REAL_SHAPES:
             raise ValueError(f"RealPushEnv: shape must be one of {', '.join(REAL_SHAPES)}, got {shape!r}")
         for fixed in ("friction", "tip_friction", "frame_skip"):
@@ -75,7 +81,7 @@ class RealPushEnv(PushEnv):
                 raise ValueError(f"RealPushEnv: {fixed} comes from the fit; pass mujoco_params instead")
         self.fitted = load_fitted_params(mujoco_params)
         if dynamics == "fignet" and checkpoint is None:
-            checkpoint = "push-real"
+            checkpoint = learned
         super().__init__(dynamics, checkpoint, shape=shape,
                          friction=self.fitted.get("friction") or DEFAULT_FRICTION,
                          tip_friction=self.fitted.get("friction_kinematic"),
@@ -90,7 +96,7 @@ class RealPushEnv(PushEnv):
 
 
 class RealPushVectorEnv(PushVectorEnv):
-    """``gym.make_vec("fignet_gym/RealPush-v0", ...)``: ``RealPushEnv`` copies run as one batch."""
+    """``gym.make_vec("fignet_gym/RealPush-v1", ...)``: ``RealPushEnv`` copies run as one batch."""
 
     env_class = RealPushEnv
 

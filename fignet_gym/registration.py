@@ -47,7 +47,12 @@ ENV_SPECS: dict[str, tuple[str, str, int | None, dict[str, Any]]] = {
         {"cone": "elliptic"},
     ),
     "fignet_gym/RealPush-v0": (
-        "fignet_gym.envs.real_push:RealPushEnv", "fignet_gym.envs.real_push:RealPushVectorEnv", 75, {}
+        "fignet_gym.envs.real_push:RealPushEnv", "fignet_gym.envs.real_push:RealPushVectorEnv", 75,
+        {"learned": "push-real-v0"},
+    ),
+    "fignet_gym/RealPush-v1": (
+        "fignet_gym.envs.real_push:RealPushEnv", "fignet_gym.envs.real_push:RealPushVectorEnv", 75,
+        {"learned": "push-real"},
     ),
     "fignet_gym/CubeToss-v0": (
         "fignet_gym.envs.cube_toss:CubeTossEnv", "fignet_gym.envs.cube_toss:CubeTossVectorEnv",

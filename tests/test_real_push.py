@@ -1,4 +1,4 @@
-"""RealPush-v0: Push-v1's task on the MuJoCo fitted to the real pushes (and push-real)."""
+"""RealPush-v1 (and v0): Push-v1's task on the MuJoCo fitted to the real pushes (and push-real)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.envs.real_push import STEP_SECONDS, RealPushEnv, load_fitted_params
 from fignet_gym.registration import PUSH_V1_KWARGS
 
-ENV_ID = "fignet_gym/RealPush-v0"
+ENV_ID = "fignet_gym/RealPush-v1"
 
 
 def test_check_env_and_seeded_episodes() -> None:
@@ -163,3 +163,19 @@ def test_evaluate_against_the_shipped_limit_surface_scores_its_replays(tmp_path,
                      str(tmp_path / "bad"), "--against", spec]) == 2
         err = capsys.readouterr().err
         assert msg in err and "limit-surface:push-real" in err and len(err.strip().splitlines()) == 1
+
+
+def test_each_version_steps_its_own_learned_model() -> None:
+    """RealPush-v0 keeps the first push-real (``push-real-v0``), v1 steps the re-shipped one; the
+    fitted MuJoCo is the same in both."""
+    import torch
+
+    from fignet_gym import load_pretrained
+
+    env0 = gym.make("fignet_gym/RealPush-v0", dynamics="fignet").unwrapped
+    env1 = gym.make("fignet_gym/RealPush-v1", dynamics="fignet").unwrapped
+    for env, name in ((env0, "push-real-v0"), (env1, "push-real")):
+        mine = env.dynamics.simulator.state_dict()
+        ref = load_pretrained(name).state_dict()
+        assert all(torch.equal(mine[k], ref[k]) for k in ref)
+    np.testing.assert_array_equal(env0.model.geom_friction, env1.model.geom_friction)
