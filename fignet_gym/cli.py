@@ -42,7 +42,12 @@ def run_command(func: Callable[[argparse.Namespace], int | None], args: argparse
 
     from fignet_gym.dynamics.mujoco import collect_warnings
 
-    def one_line(message: Warning | str, *_: object, **__: object) -> None:
+    default_show = warnings.showwarning
+
+    def one_line(message: Warning | str, category: type[Warning], *rest: object, **kw: object) -> None:
+        if issubclass(category, DeprecationWarning):  # for developers: as Python shows them
+            default_show(message, category, *rest, **kw)  # type: ignore[arg-type]
+            return
         print(f"warning: {message}", file=sys.stderr)  # a user reads the fix, not our source line
 
     with collect_warnings() as warned, warnings.catch_warnings():
