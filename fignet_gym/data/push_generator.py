@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -11,7 +10,14 @@ import mujoco
 import numpy as np
 
 from fignet_gym.data.format import Trajectory
-from fignet_gym.data.generator_base import GENERATED_SOURCE, GENERATOR_VERSION, GenerationError, num_poses
+from fignet_gym.data.generator_base import (
+    GENERATED_SOURCE,
+    GENERATOR_VERSION,
+    GenerationError,
+    PoseHook,
+    num_poses,
+    simulate_driven,
+)
 from fignet_gym.mjcf import DEFAULT_CONE, MIT_OBJECTS, PushObject, push_scene_xml
 from fignet_gym.simulator.scene import Scene
 
@@ -112,30 +118,14 @@ def tip_position(meta: dict[str, Any], t: float) -> np.ndarray:
     return start + vel * min(t, meta["tip_stop_time"])
 
 
-#: Called before pose ``k`` is recorded; may change the state (see :func:`resimulate`).
-PoseHook = Callable[[int, mujoco.MjModel, mujoco.MjData], None]
-
-
 def simulate_push(mjcf: str, meta: dict[str, Any], num_poses: int, substeps: int,
                   hook: PoseHook | None = None) -> tuple[np.ndarray, Scene]:
     """Poses ``float[T, O, 7]`` of a push scene, the tip following :func:`tip_position`."""
-    model = mujoco.MjModel.from_xml_string(mjcf)
-    data = mujoco.MjData(model)
-    scene = Scene.from_mjmodel(model)
-    h = model.opt.timestep
-    poses = np.empty((num_poses, scene.num_objects, 7))
-    mujoco.mj_forward(model, data)
-    step = 0
-    for k in range(num_poses):
-        for _ in range(substeps if k else 0):  # pose 0 is the initial state
-            step += 1
-            # the tip is where it should be at the end of the step (an implicit position drive)
-            data.mocap_pos[0, :2] = tip_position(meta, step * h)
-            mujoco.mj_step(model, data)
-        if hook is not None:
-            hook(k, model, data)
-        poses[k] = scene.poses_from_data(data)
-    return poses, scene
+
+    def drive(data: mujoco.MjData, t: float) -> None:
+        data.mocap_pos[0, :2] = tip_position(meta, t)
+
+    return simulate_driven(mjcf, num_poses, substeps, drive, hook=hook)
 
 
 def generate_push(rng: np.random.Generator, cfg: PushConfig) -> Trajectory:

@@ -25,7 +25,6 @@ from __future__ import annotations
 import math
 import os
 import warnings
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -34,7 +33,14 @@ import mujoco
 import numpy as np
 
 from fignet_gym.data.format import Trajectory
-from fignet_gym.data.generator_base import GENERATED_SOURCE, GENERATOR_VERSION, GenerationError, num_poses
+from fignet_gym.data.generator_base import (
+    GENERATED_SOURCE,
+    GENERATOR_VERSION,
+    GenerationError,
+    PoseHook,
+    num_poses,
+    simulate_driven,
+)
 from fignet_gym.simulator.scene import Scene
 
 #: How far ``dt / timestep`` may be from a whole number of substeps.
@@ -210,30 +216,19 @@ def stroke_position(stroke: dict[str, Any], t: float) -> np.ndarray:
 
 
 def simulate_scene(mjcf: str, meta: dict[str, Any], poses: int, substeps: int,
-                   hook: Callable[[int, mujoco.MjModel, mujoco.MjData], None] | None = None
-                   ) -> tuple[np.ndarray, Scene]:
+                   hook: PoseHook | None = None) -> tuple[np.ndarray, Scene]:
     """Poses ``float[T, O, 7]`` of a scene from its start state and strokes (``meta``);
     ``hook(k, model, data)`` runs before pose ``k`` is recorded (``resimulate``'s nudge)."""
-    model = mujoco.MjModel.from_xml_string(mjcf)
-    data = mujoco.MjData(model)
-    scene = Scene.from_mjmodel(model)
-    data.qpos[:] = meta["qpos0"]
-    for s in meta["strokes"]:
-        data.mocap_pos[s["mocap"], :2] = stroke_position(s, 0.0)
-    mujoco.mj_forward(model, data)
-    h = model.opt.timestep
-    out = np.empty((poses, scene.num_objects, 7))
-    step = 0
-    for k in range(poses):
-        for _ in range(substeps if k else 0):
-            step += 1
-            for s in meta["strokes"]:  # where it should be at the end of the step
-                data.mocap_pos[s["mocap"], :2] = stroke_position(s, step * h)
-            mujoco.mj_step(model, data)
-        if hook is not None:
-            hook(k, model, data)
-        out[k] = scene.poses_from_data(data)
-    return out, scene
+
+    def drive(data: mujoco.MjData, t: float) -> None:
+        for s in meta["strokes"]:
+            data.mocap_pos[s["mocap"], :2] = stroke_position(s, t)
+
+    def start(data: mujoco.MjData) -> None:
+        data.qpos[:] = meta["qpos0"]
+        drive(data, 0.0)
+
+    return simulate_driven(mjcf, poses, substeps, drive, start, hook)
 
 
 def generate_scene(rng: np.random.Generator, cfg: SceneConfig) -> Trajectory:

@@ -9,8 +9,13 @@ import mujoco
 import numpy as np
 
 from fignet_gym.data.format import Trajectory
-from fignet_gym.data.generator_base import GENERATED_SOURCE, GENERATOR_VERSION, GenerationError, num_poses
-from fignet_gym.data.push_generator import PoseHook
+from fignet_gym.data.generator_base import (
+    GENERATED_SOURCE,
+    GENERATOR_VERSION,
+    GenerationError,
+    PoseHook,
+    num_poses,
+)
 from fignet_gym.mjcf import (
     DEFAULT_CONE,
     MATERIALS,
