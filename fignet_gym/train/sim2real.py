@@ -458,11 +458,9 @@ def _pretrain(train: list, valid: list, valid_file: Path, out: Path, num: int, *
     pusher) draw new pushes of the same objects (:mod:`fignet_gym.train.synthetic_push`) from
     ``prior``: ``"mujoco"``, ``"limit-surface"`` or ``"both"`` (half each), each fitted on
     ``train``, and pretrain from ``init`` (``None``: from scratch)."""
-    from fignet_gym.data.format import write_trajectories
-    from fignet_gym.train.analytic import ContactParams
     from fignet_gym.train.real import free_flight_gravity, train_on_split
-    from fignet_gym.train.synthetic import check_tosses, synthetic_tosses
-    from fignet_gym.train.sysid import fit_contact_params
+    from fignet_gym.train.sim2real_prior import synthetic_prior  # MuJoCo fits: only when pretraining
+    from fignet_gym.train.synthetic import check_tosses
 
     push = any(_has_kinematic(t) for t in train)
     if not push:
@@ -470,45 +468,10 @@ def _pretrain(train: list, valid: list, valid_file: Path, out: Path, num: int, *
             check_tosses(train)
         except ValueError as exc:
             raise Sim2RealError(f"--pretrain: {exc}") from None
-    out.mkdir(parents=True, exist_ok=True)
-    t0 = time.process_time()
-    fit: dict[str, Any] = {}
-    ls: dict[str, float] = {}
-    if prior in ("mujoco", "both"):
-        print(f"pretraining: MuJoCo fitted on {len(train)} training trajectories ...")
-        fit = fit_contact_params(train, valid, out / "fit.json", evaluations=fit_evaluations,
-                                 fit_trajectories=min(fit_trajectories, len(train)), given=given,
-                                 horizon=horizon, seed=seed,
-                                 space=push_space(kinematic=True) if push else None)
-    if prior in ("limit-surface", "both"):
-        ls_path = out / "limit_surface_fit.json"
-        if ls_path.is_file():
-            ls = json.loads(ls_path.read_text())
-        else:
-            from fignet_gym.train.real_baselines import fit_limit_surface_on
-
-            print(f"pretraining: limit surface fitted on {len(train)} training trajectories ...")
-            mu, scale, _ = fit_limit_surface_on(train, given, horizon, fit_trajectories, seed)
-            ls = {"tip_friction": mu, "pressure_scale": scale}
-            write_text(ls_path, json.dumps(ls, indent=1))
-    synth = out / "synthetic.h5"
-    if not synth.is_file():
-        if push:
-            from fignet_gym.train.synthetic_push import PushSource, synthetic_pushes
-
-            sources = []
-            if fit:
-                sources.append(PushSource.mujoco(ContactParams.from_json(fit["params"])))
-            if ls:
-                sources.append(PushSource.limit_surface(ls["tip_friction"], ls["pressure_scale"]))
-            trajs = []
-            for k, src in enumerate(sources):
-                share = num // len(sources) + (1 if k < num % len(sources) else 0)
-                trajs += synthetic_pushes(train, src, share, seed + k, name=f"synthetic-{src.name}")
-        else:
-            trajs = synthetic_tosses(train, ContactParams.from_json(fit["params"]), num, seed)
-        write_trajectories(synth, trajs)
-    gen_seconds = time.process_time() - t0
+    synth, fit, ls, gen_seconds = synthetic_prior(
+        train, valid, out, num, prior=prior, push=push, fit_evaluations=fit_evaluations,
+        fit_trajectories=fit_trajectories, given=given, horizon=horizon, seed=seed,
+        space=push_space(kinematic=True) if push else None)
     kind = "pushes" if push else "tosses"
     print(f"pretraining: FIGNet on {num} synthetic {kind} ({prior}) ...")
     if push:
