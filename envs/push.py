@@ -23,6 +23,9 @@ from fignet_gym.envs.tasks import PushTask
 from fignet_gym.envs.vector import SingleEnvVectorEnv
 from fignet_gym.mjcf import DEFAULT_CONE, push_object, push_scene_xml
 
+#: The easiest goals of a curriculum (``PushEnv.goal_level = 0``): distance range (m) and heading
+#: range (rad), just beyond the 1 cm success tolerance; each is capped by the env's own.
+EASY_GOAL = (0.011, 0.02, 0.1)
 #: The shipped push simulator trained on each friction cone's data (Push-v2 and Push-v0/v1).
 PRETRAINED_BY_CONE = {"elliptic": "push", "pyramidal": "push-pyramidal"}
 
@@ -216,6 +219,13 @@ class PushEnv(MjDynamicsEnv):
             raise ValueError(f"PushEnv: tip_start must be 'around' or 'behind', got {tip_start!r}")
         self.tip_start = tip_start
         self.tip_gap, self.tip_jitter = float(tip_gap), float(tip_jitter)
+        #: Training-time settings a curriculum changes on a live env (``set_attr``), never
+        #: registered arguments, so an evaluation env always has the task's own goals:
+        #: ``goal_level`` in [0, 1] scales the goal ranges from :data:`EASY_GOAL` (0) to the
+        #: env's own (1, :meth:`goal_ranges`); ``resample_goal`` draws a new goal on success
+        #: (``info["goal_reached"]``) instead of terminating.
+        self.goal_level = 1.0
+        self.resample_goal = False
         self._rest_z = obj.thickness / 2
         tip_radius = float(
             model.geom_size[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "tip"), 0]
@@ -277,16 +287,7 @@ class PushEnv(MjDynamicsEnv):
         q[self._qadr : self._qadr + 3] = (0.0, 0.0, self._rest_z)
         q[self._qadr + 3 : self._qadr + 7] = (np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2))
         self.workspace_origin = np.zeros(2)
-        lo, hi = self.goal_distance_min, self.goal_distance
-        r = np.sqrt(rng.uniform(lo**2, hi**2))  # uniform over the annulus
-        phi = rng.uniform(-np.pi, np.pi)
-        self.goal = np.array(
-            [
-                r * np.cos(phi),
-                r * np.sin(phi),
-                wrap_angle(yaw + rng.uniform(-self.goal_yaw, self.goal_yaw)),
-            ]
-        )
+        self.goal, phi = self._draw_goal(rng, np.zeros(2), yaw)
         if self.tip_start == "around":
             psi = rng.uniform(-np.pi, np.pi)
             tip = self._tip_start * np.array([np.cos(psi), np.sin(psi)])
@@ -299,6 +300,26 @@ class PushEnv(MjDynamicsEnv):
             tip = contact - self.tip_gap * unit + side
         self.data.mocap_pos[self._tip_mocap, :2] = tip
         self.data.mocap_quat[self._tip_mocap] = (1.0, 0.0, 0.0, 0.0)
+
+    def goal_ranges(self) -> tuple[float, float, float]:
+        """Goal distance range (m) and heading range (rad) at :attr:`goal_level`: the env's own
+        at 1, :data:`EASY_GOAL` at 0, linear in between."""
+        lv = float(np.clip(self.goal_level, 0.0, 1.0))
+        own = (self.goal_distance_min, self.goal_distance, self.goal_yaw)
+        easy = (min(e, o) for e, o in zip(EASY_GOAL, own, strict=True))
+        lo, hi, yaw = (e + lv * (o - e) for e, o in zip(easy, own, strict=True))
+        return lo, hi, yaw
+
+    def _draw_goal(self, rng: np.random.Generator, xy: np.ndarray, yaw: float
+                   ) -> tuple[np.ndarray, float]:
+        """A goal ``float[3]`` (x, y, yaw) around the object pose ``xy float[2]``, ``yaw``, and its
+        direction (rad) from the object."""
+        lo, hi, dyaw = self.goal_ranges()
+        r = np.sqrt(rng.uniform(lo**2, hi**2))  # uniform over the annulus
+        phi = rng.uniform(-np.pi, np.pi)
+        goal = np.array([xy[0] + r * np.cos(phi), xy[1] + r * np.sin(phi),
+                         wrap_angle(yaw + rng.uniform(-dyaw, dyaw))])
+        return goal, float(phi)
 
     def task_context(self) -> dict[str, Any]:
         """The episode's goal, for :class:`~fignet_gym.envs.tasks.PushTask`."""
@@ -346,6 +367,12 @@ class PushEnv(MjDynamicsEnv):
         }
         if out:
             info["out_of_workspace"] = True
+        if success and self.resample_goal:
+            # The next goal is drawn around where the object now is; the episode goes on.
+            xy, yaw, _ = self._object_pose()
+            self.goal = self._draw_goal(self.np_random, xy, yaw)[0]
+            info["goal_reached"] = True
+            success = False
         return terms, success, out, info
 
     def _camera(self) -> int:

@@ -320,6 +320,7 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--n-epochs", type=int, default=10, help="passes over each rollout")
     o.add_argument("--lr", type=float, default=3e-4, help="Adam learning rate")
     o.add_argument("--gamma", type=float, default=0.99, help="discount")
+    o.add_argument("--gae-lambda", type=float, default=0.95, help="GAE lambda")
     o.add_argument("--ent-coef", type=float, default=0.0, help="entropy bonus")
     o.add_argument("--net-arch", default="256,256", help="hidden sizes of policy and value MLPs")
     o.add_argument("--log-std-init", type=float, default=-1.0,
@@ -336,7 +337,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="weight of the potential-based progress reward during training (0: none)")
     o.add_argument("--success-bonus", type=float, default=0.0,
                    help="extra reward of a successful step during training (0: none)")
-    o.add_argument("--eval-every", type=int, default=25_000,
+    o.add_argument("--curriculum", action="store_true",
+                   help="goal curriculum in training: new goals on success within an episode, the "
+                   "goal range widening from easy to the env's own as success rises")
+    o.add_argument("--precision", choices=["float32", "bfloat16"], default="float32",
+                   help="network precision of the learned training env (evaluation: float32)")
+    o.add_argument("--eval-every", type=int, default=50_000,
                    help="evaluate on both dynamics every N steps (0: never)")
     o.add_argument("--eval-episodes", type=int, default=32, help="episodes per periodic evaluation")
     o.add_argument("--final-episodes", type=int, default=50,

@@ -113,7 +113,8 @@ def test_fused_linear_rounds_like_plain_linear() -> None:
 
 def test_dynamics_step_many_and_rollout_equal_single_scenes(push_sim) -> None:  # noqa: ANN001
     """The env-facing Dynamics: ``step_many`` on three MjData and a batched ``rollout`` equal
-    stepping and rolling out each alone, bit for bit, over 20 steps of contact."""
+    stepping and rolling out each alone, bit for bit, over 20 steps of contact (one of them
+    losing its stored history half-way)."""
     model = compile_with_history(push_scene_xml("rect1", tip_xy=(-0.07, 0.0)))
     dyn_batch, dyn_single = FIGNetDynamics(push_sim), FIGNetDynamics(push_sim)
     batch = [mujoco.MjData(model) for _ in range(3)]
@@ -131,6 +132,9 @@ def test_dynamics_step_many_and_rollout_equal_single_scenes(push_sim) -> None:  
             for d in (batch[i], singles[i]):
                 d.mocap_pos[0, 0] += 0.002 * (i + 1)
             control[i, t, :3], control[i, t, 3:] = batch[i].mocap_pos[0], (1, 0, 0, 0)
+        if t == 10:  # a batch mixing stored histories with one reseeded from qpos/qvel
+            dyn_batch.forget(batch[1])
+            dyn_single.forget(singles[1])
         dyn_batch.step_many(model, batch, 10)
         for d in singles:
             dyn_single.step(model, d, 10)

@@ -13,6 +13,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecNormalize
 
 from fignet_gym.agents.ppo.config import RunConfig
+from fignet_gym.agents.ppo.curriculum import find_curriculum
 from fignet_gym.agents.ppo.eval import evaluate_both, summary
 from fignet_gym.agents.ppo.features import ObservationTransform
 from fignet_gym.agents.ppo.logging import CSVRows, pending_records
@@ -94,6 +95,11 @@ class RunCallback(BaseCallback):
             success=f"{np.mean(buf):.0%}" if buf else "-",
             refresh=False,
         )
+        curriculum = find_curriculum(self.training_env)
+        if curriculum is not None:
+            self.logger.record("curriculum/level", curriculum.level)
+            self.logger.record("curriculum/goal_success", curriculum.success_rate())
+            self.logger.record("curriculum/goals_reached", curriculum.goals_reached)
         if self.next_eval is not None and t >= self.next_eval:
             self.next_eval = (t // self.cfg.eval_every + 1) * self.cfg.eval_every
             self.evaluate(t)
@@ -129,7 +135,11 @@ class RunCallback(BaseCallback):
     def checkpoint(self) -> None:
         """Save the resumable state at the current step."""
         cpu, wall = self.seconds()
-        write_checkpoint(self.root, self.model, {"cpu_seconds": cpu, "wall_seconds": wall})
+        extra: dict[str, Any] = {"cpu_seconds": cpu, "wall_seconds": wall}
+        curriculum = find_curriculum(self.model.get_env())
+        if curriculum is not None:
+            extra["curriculum"] = curriculum.state()
+        write_checkpoint(self.root, self.model, extra)
 
     def _on_training_end(self) -> None:
         self.bar.close()

@@ -13,9 +13,11 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 #: The environment a run trains on unless told otherwise: the current Push version.
-PUSH_ID = "fignet_gym/Push-v1"
+PUSH_ID = "fignet_gym/Push-v2"
 #: Training dynamics a run accepts (the env's ``dynamics=`` names).
 DYNAMICS = ("mujoco", "fignet")
+#: Network precisions of the learned training env (``FIGNetDynamics(precision=)``).
+PRECISIONS = ("float32", "bfloat16")
 #: More sub-environments than this would only exhaust memory (each holds its own ``MjData`` and,
 #: for the learned dynamics, its share of one graph); 1024 is 30x the recipe's batch.
 MAX_NUM_ENVS = 1024
@@ -159,6 +161,12 @@ class RunConfig:
         success_bonus: extra reward of a successful step during training
             (:class:`~fignet_gym.agents.ppo.features.SuccessBonus`; 0: none). Evaluation and the
             logged returns always use the env's own reward.
+        curriculum: train with a goal curriculum (:mod:`~fignet_gym.agents.ppo.curriculum`: goals
+            resampled on success within an episode, the goal range widening from easy to the
+            env's own with success); evaluation always has the env's own goals.
+        precision: the learned simulator's network precision in the training env
+            (``"bfloat16"``: about 1.4x the env steps per CPU-second; ``docs/ppo.md``); every
+            evaluation runs it in float32.
     """
 
     env_id: str = PUSH_ID
@@ -175,8 +183,14 @@ class RunConfig:
     observation: str = "env"
     shaping: float = 0.0
     success_bonus: float = 0.0
+    curriculum: bool = False
+    precision: str = "float32"
 
     def __post_init__(self) -> None:
+        if self.precision not in PRECISIONS:
+            raise ConfigError("precision", f"must be one of {PRECISIONS}, got {self.precision!r}")
+        if not isinstance(self.curriculum, bool):
+            raise ConfigError("curriculum", f"must be true or false, got {self.curriculum!r}")
         if self.observation not in OBSERVATIONS:
             raise ConfigError("observation", f"must be one of {OBSERVATIONS}, got {self.observation!r}")
         if not (_finite(self.shaping) and 0 <= self.shaping <= MAX_SHAPING):

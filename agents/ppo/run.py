@@ -33,6 +33,7 @@ from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
 from fignet_gym.agents.ppo.callback import RunCallback, Stop
 from fignet_gym.agents.ppo.config import RunConfig
+from fignet_gym.agents.ppo.curriculum import GoalCurriculum, find_curriculum
 from fignet_gym.agents.ppo.eval import evaluate_both, run_env_kwargs
 from fignet_gym.agents.ppo.features import (
     ObservationTransform,
@@ -113,12 +114,16 @@ def check_features(cfg: RunConfig) -> None:
 
 def _train_env(cfg: RunConfig) -> tuple[VecNormalize, ObservationTransform]:
     """The training env and the observation transform it applies (the policy's, too)."""
-    base = make_sb3_vec_env(cfg.env_id, cfg.ppo.num_envs, **run_env_kwargs(cfg, cfg.dynamics))
+    kwargs = run_env_kwargs(cfg, cfg.dynamics)
+    if cfg.dynamics == "fignet" and cfg.precision != "float32":
+        kwargs["dynamics_kwargs"] = {**(kwargs.get("dynamics_kwargs") or {}), "precision": cfg.precision}
+    base = make_sb3_vec_env(cfg.env_id, cfg.ppo.num_envs, **kwargs)
     first = base.venv.envs[0]
     transform = ObservationTransform.of_env(cfg.observation, first)
+    vec: Any = GoalCurriculum(base) if cfg.curriculum else base
     # VecMonitor right above the env: the logged episode returns are the env's own reward,
     # whatever shaping and normalisation PPO trains on above it.
-    vec: Any = VecMonitor(base)
+    vec = VecMonitor(vec)
     if cfg.shaping:
         task = first.task
         vec = ProgressShaping(vec, cfg.ppo.gamma, cfg.shaping, task.position_weight,
@@ -159,6 +164,9 @@ def _resumed_model(root: Path, vec: VecNormalize, state: dict[str, Any]) -> tupl
     model = RunPPO.load(ck / MODEL, env=vec, device="cpu")
     model._last_obs = None  # the saved env state is gone: start new episodes (seeded below)
     set_rng_state(vec, state["rng"])
+    curriculum = find_curriculum(vec)
+    if curriculum is not None and "curriculum" in state:
+        curriculum.load_state(state["curriculum"])
     adapter(vec)._reset_seeds()  # PPO.load reseeded the env; the restored streams rule
     return model, vec
 

@@ -180,34 +180,44 @@ class FIGNetDynamics(DynamicsBase):
         return info
 
     # ----------------------------------------------------------------- history
-    def _current(self, info: _SceneInfo, data: mujoco.MjData) -> tuple[Tensor, Tensor, Tensor]:
-        """Current poses ``float[O, 7]``, dynamic linear (world) and angular (body) velocities
-        ``float[D, 3]``."""
-        poses = info.scene.static_poses.double().cpu().numpy().copy()
-        poses[info.dyn] = data.qpos[info.qadr[:, None] + np.arange(7)]
-        quat = data.xquat[info.kin_body]
-        use_x = np.linalg.norm(quat, axis=1) > 0.5  # xquat is zero until the first mj_forward
-        poses[info.kin, :3] = np.where(
-            use_x[:, None], data.xpos[info.kin_body], data.mocap_pos[info.kin_mocap]
-        )
-        poses[info.kin, 3:] = np.where(use_x[:, None], quat, data.mocap_quat[info.kin_mocap])
-        vel = data.qvel[info.dadr[:, None] + np.arange(6)]
+    def _current(self, info: _SceneInfo, datas: Sequence[mujoco.MjData]
+                 ) -> tuple[Tensor, Tensor, Tensor]:
+        """Current poses ``float[B, O, 7]``, dynamic linear (world) and angular (body) velocities
+        ``float[B, D, 3]`` of ``B`` datas."""
+        qa = info.qadr[:, None] + np.arange(7)
+        poses = np.repeat(info.scene.static_poses.double().cpu().numpy()[None], len(datas), 0)
+        poses[:, info.dyn] = np.stack([d.qpos[qa] for d in datas])
+        if len(info.kin):
+            quat = np.stack([d.xquat[info.kin_body] for d in datas])
+            use_x = (np.linalg.norm(quat, axis=-1) > 0.5)[..., None]  # zero until mj_forward
+            pos = np.stack([d.xpos[info.kin_body] for d in datas])
+            poses[:, info.kin, :3] = np.where(
+                use_x, pos, np.stack([d.mocap_pos[info.kin_mocap] for d in datas]))
+            poses[:, info.kin, 3:] = np.where(
+                use_x, quat, np.stack([d.mocap_quat[info.kin_mocap] for d in datas]))
+        vel = np.stack([d.qvel[info.dadr[:, None] + np.arange(6)] for d in datas])
         f = lambda x: torch.as_tensor(x, dtype=torch.float32, device=self.simulator.device)  # noqa: E731
         p = f(poses)
-        p[:, 3:] = quat_normalize(p[:, 3:])
-        return p, f(vel[:, :3]), f(vel[:, 3:])
+        p[..., 3:] = quat_normalize(p[..., 3:])
+        return p, f(vel[..., :3]), f(vel[..., 3:])
 
-    def _history(self, model: mujoco.MjModel, info: _SceneInfo, data: mujoco.MjData,
+    def _history(self, model: mujoco.MjModel, info: _SceneInfo, datas: Sequence[mujoco.MjData],
                  warn: bool = True) -> Tensor:
-        """History ``float[H, O, 7]`` of ``data``: its ``userdata`` frames where they fit, a
-        constant-velocity reseed (see the class doc) for every other object (``warn``: once per
+        """History ``float[H, B*O, 7]`` of ``B`` datas: their ``userdata`` frames where they fit,
+        a constant-velocity reseed (see the class doc) for every other object (``warn``: once per
         model without room for the history, which loses it between calls)."""
         H = self.simulator.config.history + 1
-        mujoco.mj_normalizeQuat(model, data.qpos)  # as mj_step does: a zero quaternion -> identity
-        cur, lin, ang = self._current(info, data)
-        hist = cur[None].repeat(H, 1, 1)
+        for d in datas:
+            mujoco.mj_normalizeQuat(model, d.qpos)  # as mj_step does: a zero quaternion -> identity
+        cur, lin, ang = self._current(info, datas)
+        B, n_obj = cur.shape[:2]
+        hist = cur[None].repeat(H, 1, 1, 1)
+        dyn_cur = cur[:, info.dyn].reshape(-1, 7)
+        lin, ang = lin.reshape(-1, 3), ang.reshape(-1, 3)
         for k in range(H):
-            hist[H - 1 - k, info.dyn] = integrate_back(cur[info.dyn], lin, ang, k, self.dt)
+            hist[H - 1 - k, :, info.dyn] = integrate_back(dyn_cur, lin, ang, k, self.dt).view(
+                B, len(info.dyn), 7)
+        hist = hist.view(H, B * n_obj, 7)
         if not history.has_history(model):
             if warn and model not in self._warned:
                 self._warned.add(model)
@@ -217,16 +227,20 @@ class FIGNetDynamics(DynamicsBase):
             return hist
         objects = np.concatenate((info.dyn, info.kin))
         track = np.concatenate((info.dyn_track, info.kin_track))
-        now = np.zeros((history.num_tracked(model), 7))
-        now[track] = cur[objects].double().cpu().numpy()
-        now[info.dyn_track] = data.qpos[info.qadr[:, None] + np.arange(7)]
-        counts = history.valid_counts(model, data.userdata, data.time, self.dt, now, data.qvel)
-        ok = counts[track] >= H
+        now = np.zeros((B, history.num_tracked(model), 7))
+        now[:, track] = cur[:, objects].double().cpu().numpy()
+        now[:, info.dyn_track] = np.stack([d.qpos[info.qadr[:, None] + np.arange(7)] for d in datas])
+        userdata = np.stack([d.userdata for d in datas])
+        counts = history.valid_counts(model, userdata, np.array([d.time for d in datas]), self.dt,
+                                      now, np.stack([d.qvel for d in datas]))
+        ok = counts[:, track] >= H  # [B, len(objects)]
         if H <= history.FRAMES and ok.any():
-            frames = history.unpack(model, data.userdata)[4]  # [FRAMES, n, 7], newest first
-            stored = torch.as_tensor(frames[:H][::-1].copy(), dtype=hist.dtype, device=hist.device)
-            rows = torch.as_tensor(objects[ok], device=hist.device)
-            hist[:, rows] = stored[:, torch.as_tensor(track[ok], device=hist.device)]
+            frames = history.unpack(model, userdata)[4]  # [B, FRAMES, n, 7], newest first
+            b, j = np.nonzero(ok)
+            stored = frames[b, :H][:, ::-1][np.arange(len(b)), :, track[j]]  # [M, H, 7]
+            rows = torch.as_tensor(b * n_obj + objects[j], device=hist.device)
+            hist[:, rows] = torch.as_tensor(
+                np.ascontiguousarray(stored.transpose(1, 0, 2)), dtype=hist.dtype, device=hist.device)
         return hist
 
     def _userdata(self, model: mujoco.MjModel, info: _SceneInfo, hist: Tensor, times: np.ndarray,
@@ -372,8 +386,7 @@ class FIGNetDynamics(DynamicsBase):
         B = len(datas)
         if B == 0:
             return
-        hists = [self._history(model, info, d) for d in datas]
-        hist = torch.cat(hists, dim=1)
+        hist = self._history(model, info, datas)
         m = info.kin_mocap
         pos = np.stack([d.mocap_pos[m] for d in datas])
         quat = normalize_mocap_quat(np.stack([d.mocap_quat[m] for d in datas]))
@@ -423,7 +436,7 @@ class FIGNetDynamics(DynamicsBase):
         for row in uniq:
             mujoco.mj_setState(model, scratch, row, STATE_SPEC)
             scratch.xquat[:] = 0.0  # mocap bodies start at the state's mocap_pos / mocap_quat
-            hists.append(self._history(model, info, scratch, warn=False))
+            hists.append(self._history(model, info, [scratch], warn=False))
         hist = torch.cat([hists[i] for i in inverse.ravel()], dim=1)
         times = [float(t) for t in state[:, 0]]
         out = np.full((B, nstep, nstate), np.nan)

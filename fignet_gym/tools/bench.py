@@ -11,7 +11,9 @@ make more threads much slower (``OMP_WAIT_POLICY=PASSIVE`` limits the damage).
 ``--shipped``: the shipped models at each ``--batch`` size, stepped as ``FIGNetDynamics`` does,
 with the network's analytic FLOPs and its GFLOP/s next to plain ``torch.mm`` on the same shapes
 (:mod:`fignet_gym.tools.bench_limits`). ``--rollout``: ``Dynamics.rollout`` scene-steps per second,
-learned against ``mujoco.rollout``. ``--json PATH`` writes their figures. Timings are CPU seconds.
+learned against ``mujoco.rollout``. ``--ppo``: env steps per CPU-second of the whole PPO loop on
+MuJoCo and on FIGNet (:mod:`fignet_gym.agents.ppo.bench`; ``--repeats`` is its number of
+repetitions). ``--json PATH`` writes their figures. Timings are CPU seconds.
 """
 
 from __future__ import annotations
@@ -202,6 +204,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "--rollout-batch over --rollout-steps steps")
     p.add_argument("--rollout-batch", type=int, nargs="*", default=[1, 64, 256, 1024])
     p.add_argument("--rollout-steps", type=int, default=25)
+    p.add_argument("--ppo", action="store_true",
+                   help="env steps per CPU-second of the PPO loop (rollouts and updates) on "
+                        "MuJoCo and on FIGNet in float32 and bfloat16")
+    p.add_argument("--ppo-env", default="fignet_gym/Push-v2", help="with --ppo: the env id")
+    p.add_argument("--ppo-setting", type=int, nargs=4, default=[256, 32, 2048, 5],
+                   metavar=("ENVS", "N_STEPS", "BATCH", "EPOCHS"),
+                   help="with --ppo: sub-environments, steps per update, minibatch, epochs")
     p.add_argument("--json", metavar="PATH", help="write every figure to this JSON file")
 
 
@@ -284,6 +293,15 @@ def run(args: argparse.Namespace) -> None:
     """Benchmark paper-size and CPU-size models on the push and toss scenes."""
     if args.threads:
         torch.set_num_threads(args.threads)
+    if args.ppo:
+        from fignet_gym.agents.ppo.bench import ppo_throughput_table
+
+        table, rows = ppo_throughput_table(args.ppo_env, *args.ppo_setting, repeats=args.repeats)
+        print(table)
+        if args.json:
+            Path(args.json).write_text(json.dumps({"ppo": rows}, indent=1))
+            print(f"wrote {args.json}")
+        return
     if args.shipped or args.rollout:
         dtype = getattr(torch, args.dtype)
         print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, device cpu, network "

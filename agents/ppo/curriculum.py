@@ -1,0 +1,90 @@
+"""A goal curriculum for PPO on a push env, as MuJoCo Playground's pushing tasks train: goals
+resampled within an episode on success, and a goal range that widens from easy to the env's own as
+the agent succeeds. Training-time only: evaluation envs are built from the run's arguments and
+always have the task's own goals."""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
+
+from fignet_gym.agents.ppo.rng import adapter
+
+#: Goals attempted (reached or ended unreached) over which the success rate is taken.
+WINDOW = 256
+#: Success rate over the window at which the level rises by :data:`LEVEL_STEP`.
+THRESHOLD = 0.6
+LEVEL_STEP = 0.1
+
+
+class GoalCurriculum(VecEnvWrapper):
+    """Sets ``resample_goal`` and ``goal_level`` (:class:`~fignet_gym.envs.push.PushEnv`) on every
+    sub-environment of ``venv`` and raises the level by :data:`LEVEL_STEP` each time the share of
+    goals reached over the last :data:`WINDOW` attempts reaches :data:`THRESHOLD`.
+
+    A goal counts as reached on a step whose info has ``goal_reached``, as missed when its episode
+    ends (time limit, workspace, divergence) before. Sit it right above the batched env's SB3
+    adapter, so ``VecMonitor`` above still logs the env's own reward.
+    """
+
+    def __init__(self, venv: VecEnv, level: float = 0.0) -> None:
+        super().__init__(venv)
+        envs = adapter(venv).venv.envs
+        if not all(hasattr(e, "goal_level") and hasattr(e, "resample_goal") for e in envs):
+            raise ValueError(f"a goal curriculum needs a push env, not {type(envs[0]).__name__}")
+        self.outcomes: deque[bool] = deque(maxlen=WINDOW)
+        self.goals_reached = 0
+        self._set(level)
+        adapter(venv).venv.set_attr("resample_goal", True)
+
+    def _set(self, level: float) -> None:
+        self.level = float(np.clip(level, 0.0, 1.0))
+        adapter(self.venv).venv.set_attr("goal_level", self.level)
+
+    def reset(self) -> Any:
+        """The wrapped env's reset (the level stays)."""
+        return self.venv.reset()
+
+    def step_wait(self) -> VecEnvStepReturn:
+        """The wrapped step; counts goals and raises the level when they are reached often."""
+        obs, rewards, dones, infos = self.venv.step_wait()
+        for done, info in zip(dones, infos, strict=True):
+            if info.get("goal_reached"):
+                self.outcomes.append(True)
+                self.goals_reached += 1
+            elif done:
+                self.outcomes.append(False)
+        if (self.level < 1.0 and len(self.outcomes) == WINDOW
+                and np.mean(self.outcomes) >= THRESHOLD):
+            self._set(self.level + LEVEL_STEP)
+            self.outcomes.clear()
+        return obs, rewards, dones, infos
+
+    def success_rate(self) -> float:
+        """Share of the window's goals reached (NaN before any ended)."""
+        return float(np.mean(self.outcomes)) if self.outcomes else float("nan")
+
+    def state(self) -> dict[str, Any]:
+        """What a checkpoint keeps: the level and the window."""
+        return {"level": self.level, "outcomes": [bool(o) for o in self.outcomes],
+                "goals_reached": self.goals_reached}
+
+    def load_state(self, state: dict[str, Any]) -> None:
+        """Inverse of :meth:`state`."""
+        self._set(float(state["level"]))
+        self.outcomes = deque((bool(o) for o in state["outcomes"]), maxlen=WINDOW)
+        self.goals_reached = int(state.get("goals_reached", 0))
+
+
+def find_curriculum(vec: VecEnv) -> GoalCurriculum | None:
+    """The :class:`GoalCurriculum` under ``vec``'s SB3 wrappers, if any."""
+    inner: Any = vec
+    while isinstance(inner, VecEnvWrapper):
+        if isinstance(inner, GoalCurriculum):
+            return inner
+        inner = inner.venv
+    return None
