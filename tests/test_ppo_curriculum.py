@@ -78,9 +78,15 @@ def test_level_rises_after_a_window_of_reached_goals_and_not_otherwise() -> None
     easy.reset()
     assert easy.level == 0.0
     assert all(e.resample_goal and e.goal_level == 0.0 for e in easy.venv.venv.envs)
-    for _ in range(cur.WINDOW // 64):
+    # Every episode reaches its first goal on its first step and then practises until the
+    # 75-step limit: one outcome per episode, so the window fills on the fourth episode's start.
+    rose_at = None
+    for t in range(1, 4 * 75 + 1):
         easy.step(np.zeros((64, 2)))
-    assert easy.level == pytest.approx(cur.LEVEL_STEP) and easy.goals_reached == cur.WINDOW
+        if rose_at is None and easy.level > 0:
+            rose_at = t
+    assert rose_at == 3 * 75 + 1 and easy.goals_reached == 4 * 75 * 64
+    assert easy.level == pytest.approx(cur.LEVEL_STEP)
     assert all(e.goal_level == pytest.approx(cur.LEVEL_STEP) for e in easy.venv.venv.envs)
     hard = _curriculum(64, success_position=1e-6, success_yaw=1e-6)  # never reached
     hard.reset()

@@ -14,7 +14,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 
 from fignet_gym.agents.ppo.rng import adapter
 
-#: Goals attempted (reached or ended unreached) over which the success rate is taken.
+#: Episodes over which the success rate is taken.
 WINDOW = 256
 #: Success rate over the window at which the level rises by :data:`LEVEL_STEP`.
 THRESHOLD = 0.6
@@ -24,10 +24,14 @@ LEVEL_STEP = 0.1
 class GoalCurriculum(VecEnvWrapper):
     """Sets ``resample_goal`` and ``goal_level`` (:class:`~fignet_gym.envs.push.PushEnv`) on every
     sub-environment of ``venv`` and raises the level by :data:`LEVEL_STEP` each time the share of
-    goals reached over the last :data:`WINDOW` attempts reaches :data:`THRESHOLD`.
+    episodes that reached their first goal, over the last :data:`WINDOW`, reaches
+    :data:`THRESHOLD`.
 
-    A goal counts as reached on a step whose info has ``goal_reached``, as missed when its episode
-    ends (time limit, workspace, divergence) before. Sit it right above the batched env's SB3
+    The success rate is over episodes: an episode succeeds when it reaches its first goal (the one
+    its reset drew, the task's own measure), fails when it ends (time limit, workspace,
+    divergence) before; the goals drawn after a success are practice and not counted, since the
+    one in progress at the time limit would otherwise count as a miss and cap the rate at
+    ``k / (k + 1)`` for ``k`` goals an episode. Sit it right above the batched env's SB3
     adapter, so ``VecMonitor`` above still logs the env's own reward.
     """
 
@@ -37,6 +41,7 @@ class GoalCurriculum(VecEnvWrapper):
         if not all(hasattr(e, "goal_level") and hasattr(e, "resample_goal") for e in envs):
             raise ValueError(f"a goal curriculum needs a push env, not {type(envs[0]).__name__}")
         self.outcomes: deque[bool] = deque(maxlen=WINDOW)
+        self._first = np.ones(venv.num_envs, dtype=bool)  # still on the episode's first goal
         self.goals_reached = 0
         self._set(level)
         adapter(venv).venv.set_attr("resample_goal", True)
@@ -47,17 +52,20 @@ class GoalCurriculum(VecEnvWrapper):
 
     def reset(self) -> Any:
         """The wrapped env's reset (the level stays)."""
+        self._first[:] = True
         return self.venv.reset()
 
     def step_wait(self) -> VecEnvStepReturn:
         """The wrapped step; counts goals and raises the level when they are reached often."""
         obs, rewards, dones, infos = self.venv.step_wait()
-        for done, info in zip(dones, infos, strict=True):
-            if info.get("goal_reached"):
-                self.outcomes.append(True)
-                self.goals_reached += 1
-            elif done:
-                self.outcomes.append(False)
+        for i, (done, info) in enumerate(zip(dones, infos, strict=True)):
+            reached = bool(info.get("goal_reached"))
+            self.goals_reached += reached
+            if self._first[i] and (reached or done):
+                self.outcomes.append(reached)
+                self._first[i] = False
+            if done:
+                self._first[i] = True
         if (self.level < 1.0 and len(self.outcomes) == WINDOW
                 and np.mean(self.outcomes) >= THRESHOLD):
             self._set(self.level + LEVEL_STEP)
@@ -65,7 +73,7 @@ class GoalCurriculum(VecEnvWrapper):
         return obs, rewards, dones, infos
 
     def success_rate(self) -> float:
-        """Share of the window's goals reached (NaN before any ended)."""
+        """Share of the window's episodes that reached their first goal (NaN before any)."""
         return float(np.mean(self.outcomes)) if self.outcomes else float("nan")
 
     def state(self) -> dict[str, Any]:
