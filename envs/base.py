@@ -208,6 +208,14 @@ class MjDynamicsEnv(gym.Env[np.ndarray, np.ndarray]):
         reward = float(sum(terms.values()))
         return self._observe(), reward, bool(terminated), bool(truncated), {**terms, **info}
 
+    def _post_step_many(
+        self, envs: Sequence[MjDynamicsEnv], actions: Sequence[np.ndarray],
+        diverged: Sequence[str | None]
+    ) -> list[tuple[np.ndarray, float, bool, bool, dict[str, Any]]]:
+        """:meth:`_post_step` of each of ``envs`` (sub-environments spawned from this one) after
+        one batched dynamics step; a subclass may compute them together."""
+        return [e._post_step(a, d) for e, a, d in zip(envs, actions, diverged, strict=True)]
+
     def render(self) -> np.ndarray | None:
         """``uint8[height, width, 3]`` frame of the current state (MuJoCo's renderer)."""
         if self.render_mode is None:

@@ -4,6 +4,7 @@ Pushing setting."""
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from typing import Any
 
 import mujoco
@@ -330,50 +331,72 @@ class PushEnv(MjDynamicsEnv):
         tip[:2] = self.task.tip_path(tip[:2], action[None])[0]
 
     def _observe(self) -> np.ndarray:
-        xy, yaw, _ = self._object_pose()
-        tip = self.data.mocap_pos[self._tip_mocap, :2]
+        return self._observe_many([self])[0]
+
+    def _observe_many(self, envs: Sequence[PushEnv]) -> np.ndarray:
+        """Observations ``float32[B, 19]`` of ``envs`` (this one's spawned copies)."""
+        qa = self._qadr + np.arange(7)
+        q = np.stack([e.data.qpos[qa] for e in envs])
+        vel = np.stack([e.data.qvel[self._dadr : self._dadr + 6] for e in envs])
+        tip = np.stack([e.data.mocap_pos[self._tip_mocap, :2] for e in envs])
+        goal = np.stack([e.goal for e in envs])
+        xy, yaw = q[:, :2], yaw_of(q[:, 3:])
         c, s = np.cos(yaw), np.sin(yaw)
-        to_obj = np.array([[c, s], [-s, c]])  # world -> object frame
-        vel = self.data.qvel[self._dadr : self._dadr + 6]
-        w_world = np.zeros(3)
-        mujoco.mju_rotVecQuat(w_world, vel[3:], self.data.qpos[self._qadr + 3 : self._qadr + 7])
-        dyaw = self.goal[2] - yaw
-        obs = np.concatenate(
-            [
-                xy,
-                [c, s],
-                tip,
-                self.goal[:2],
-                [np.cos(self.goal[2]), np.sin(self.goal[2])],
-                to_obj @ (self.goal[:2] - xy),
-                [np.cos(dyaw), np.sin(dyaw)],
-                to_obj @ (tip - xy),
-                vel[:2],
-                w_world[2:],
-            ]
-        )
+
+        def to_obj(v: np.ndarray) -> np.ndarray:  # world -> object frame, float[B, 2]
+            return np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1]], -1)
+
+        w_world = np.zeros((len(envs), 3))
+        for i in range(len(envs)):  # MuJoCo's own rotation of the body-frame angular velocity
+            mujoco.mju_rotVecQuat(w_world[i], vel[i, 3:], q[i, 3:])
+        dyaw = goal[:, 2] - yaw
+        obs = np.concatenate([
+            xy, np.stack([c, s], -1), tip, goal[:, :2],
+            np.stack([np.cos(goal[:, 2]), np.sin(goal[:, 2])], -1), to_obj(goal[:, :2] - xy),
+            np.stack([np.cos(dyaw), np.sin(dyaw)], -1), to_obj(tip - xy), vel[:, :2],
+            w_world[:, 2:],
+        ], -1)
         return obs.astype(np.float32)
 
-    def _evaluate(self, action: np.ndarray) -> tuple[dict[str, float], bool, bool, dict[str, Any]]:
-        state = self.get_state()
-        terms = {k: float(v) for k, v in self.task.reward_terms(state, self.goal, action).items()}
-        pos_err, yaw_err = self.task.errors(state, self.goal)
-        success = bool(self.task.is_success(state, self.goal))
-        out = bool(self.task.out_of_workspace(state, self.workspace_origin))
-        info: dict[str, Any] = {
-            "position_error": float(pos_err),
-            "orientation_error": float(yaw_err),
-            "is_success": success,
-        }
-        if out:
-            info["out_of_workspace"] = True
-        if success and self.resample_goal:
-            # The next goal is drawn around where the object now is; the episode goes on.
-            xy, yaw, _ = self._object_pose()
-            self.goal = self._draw_goal(self.np_random, xy, yaw)[0]
-            info["goal_reached"] = True
-            success = False
-        return terms, success, out, info
+    def _post_step(
+        self, action: np.ndarray, diverged: str | None
+    ) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        return self._post_step_many([self], [action], [diverged])[0]
+
+    def _post_step_many(
+        self, envs: Sequence[PushEnv], actions: Sequence[np.ndarray],
+        diverged: Sequence[str | None]
+    ) -> list[tuple[np.ndarray, float, bool, bool, dict[str, Any]]]:
+        """The task's reward, success and workspace of every env from one batched call each
+        (single envs take the same path, so a vector env reproduces them bit for bit)."""
+        task = self.task
+        states = np.stack([e.get_state() for e in envs])
+        goals = np.stack([e.goal for e in envs])
+        terms = task.reward_terms(states, goals, np.stack(actions))
+        pos_err, yaw_err = task.errors(states, goals)
+        success = task.success_of(pos_err, yaw_err)
+        out = task.out_of_workspace(states, np.stack([e.workspace_origin for e in envs]))
+        reward = sum(terms.values())  # the env's term order, as the planners' task.reward
+        results: list[tuple[Any, float, bool, bool, dict[str, Any]]] = []
+        for i, e in enumerate(envs):
+            info: dict[str, Any] = {k: float(v[i]) for k, v in terms.items()}
+            info.update(position_error=float(pos_err[i]), orientation_error=float(yaw_err[i]),
+                        is_success=bool(success[i]))
+            terminated, truncated = bool(success[i]), bool(out[i])
+            if truncated:
+                info["out_of_workspace"] = True
+            if terminated and e.resample_goal:
+                # The next goal is drawn around where the object now is; the episode goes on.
+                xy, yaw, _ = e._object_pose()
+                e.goal = e._draw_goal(e.np_random, xy, yaw)[0]
+                info["goal_reached"] = True
+                terminated = False
+            if diverged[i] is not None:
+                truncated = True
+                info["diverged"] = diverged[i]
+            results.append((None, float(reward[i]), terminated, truncated, info))
+        obs = self._observe_many(envs)
+        return [(obs[i], *r[1:]) for i, r in enumerate(results)]
 
     def _camera(self) -> int:
         return self._camera_id

@@ -186,7 +186,7 @@ class PushTask(Task):
             "reward_action": -self.action_weight * np.sum(act**2, axis=-1),
         }
         if self.success_weight:
-            success = (pos < self.success_position) & (yaw < self.success_yaw)
+            success = self.success_of(pos, yaw)
             terms["reward_success"] = self.success_weight * success.astype(np.float64)
         return terms
 
@@ -199,7 +199,10 @@ class PushTask(Task):
 
     def is_success(self, states: np.ndarray, goal: np.ndarray) -> np.ndarray:
         """``bool[...]``: both errors within tolerance (termination)."""
-        pos, yaw = self.errors(states, goal)
+        return self.success_of(*self.errors(states, goal))
+
+    def success_of(self, pos: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+        """``bool[...]`` of the errors ``float[...]`` of :meth:`errors`: both within tolerance."""
         return (pos < self.success_position) & (yaw < self.success_yaw)
 
     def out_of_workspace(self, states: np.ndarray, origin_xy: np.ndarray) -> np.ndarray:

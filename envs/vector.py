@@ -157,14 +157,15 @@ class BatchedVectorEnv(VectorEnv):
         terminated = np.zeros(self.num_envs, dtype=bool)
         truncated = np.zeros(self.num_envs, dtype=bool)
         infos: dict[str, Any] = {}
+        stepped = dict(zip(stepping.tolist(), self.envs[0]._post_step_many(
+            [self.envs[i] for i in stepping], [applied[i] for i in stepping],
+            [reasons.get(i) for i in stepping]) if len(stepping) else [], strict=True))
         for i, env in enumerate(self.envs):
             if resetting[i]:
                 obs[i], info = env.reset()
                 self._elapsed[i] = 0
             else:
-                obs[i], rewards[i], terminated[i], truncated[i], info = env._post_step(
-                    applied[i], reasons.get(i)
-                )
+                obs[i], rewards[i], terminated[i], truncated[i], info = stepped[i]
                 self._elapsed[i] += 1
                 if (
                     self.max_episode_steps is not None
