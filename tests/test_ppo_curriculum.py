@@ -144,3 +144,19 @@ def test_run_checkpoints_the_level_and_evaluates_on_the_envs_own_goals(tmp_path:
     finally:
         GoalCurriculum.load_state = original  # type: ignore[method-assign]
     assert seen == [0.7]
+
+
+def test_a_reached_goal_ends_the_episode_for_ppo_but_not_the_world() -> None:
+    """PPO sees each goal as an episode (done, not truncated, so no bootstrapping into the next
+    goal's costs); the physical episode goes on from where the object is."""
+    c = _curriculum(2, success_position=1.0, success_yaw=4.0)  # every step reaches its goal
+    c.reset()
+    envs = c.venv.venv.envs
+    c.step(np.ones((2, 2)))
+    before = [e.data.qpos.copy() for e in envs]
+    tips = [e.data.mocap_pos[0].copy() for e in envs]
+    _, _, dones, infos = c.step(np.ones((2, 2)))
+    assert dones.all() and all(i["goal_reached"] and i["TimeLimit.truncated"] is False for i in infos)
+    for e, q, tip in zip(envs, before, tips, strict=True):  # not reset: the tip moved on by one step
+        assert np.linalg.norm(e.data.mocap_pos[0, :2] - tip[:2]) == pytest.approx(0.1 * 0.02 * np.sqrt(2))
+        assert e.data.time > 0.03 and np.abs(e.data.qpos - q).max() < 0.01

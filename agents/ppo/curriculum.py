@@ -58,6 +58,7 @@ class GoalCurriculum(VecEnvWrapper):
     def step_wait(self) -> VecEnvStepReturn:
         """The wrapped step; counts goals and raises the level when they are reached often."""
         obs, rewards, dones, infos = self.venv.step_wait()
+        ends = dones.copy()
         for i, (done, info) in enumerate(zip(dones, infos, strict=True)):
             reached = bool(info.get("goal_reached"))
             self.goals_reached += reached
@@ -66,11 +67,18 @@ class GoalCurriculum(VecEnvWrapper):
                 self._first[i] = False
             if done:
                 self._first[i] = True
+            elif reached:
+                # For PPO a reached goal ends an episode (no bootstrapping into the next goal's
+                # costs, which would make reaching a goal worth less than hovering near it);
+                # the world goes on, so the observation returned is the next one's first.
+                ends[i] = True
+                info["terminal_observation"] = obs[i].copy()
+                info["TimeLimit.truncated"] = False
         if (self.level < 1.0 and len(self.outcomes) == WINDOW
                 and np.mean(self.outcomes) >= THRESHOLD):
             self._set(self.level + LEVEL_STEP)
             self.outcomes.clear()
-        return obs, rewards, dones, infos
+        return obs, rewards, ends, infos
 
     def success_rate(self) -> float:
         """Share of the window's episodes that reached their first goal (NaN before any)."""
