@@ -159,6 +159,19 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_tool(args: argparse.Namespace) -> int:
+    """``bench-envs`` / ``bench-collision``: the tool's own options (``--help`` lists them)."""
+    if args.tool == "bench-envs":
+        from fignet_gym.tools.bench_envs import main as tool
+    else:
+        from fignet_gym.tools.bench_collision import main as tool
+    try:
+        tool(args.rest)
+    except SystemExit as exc:  # argparse's own exit (--help: 0, a bad option: 2)
+        return int(exc.code or 0)
+    return 0
+
+
 def _one_line_errors(run: Callable[[argparse.Namespace], object], user_error: type[Exception],
                      args: argparse.Namespace) -> int:
     """``run(args)``; a ``user_error`` is one ``error:`` line and exit 2, never a traceback."""
@@ -238,6 +251,10 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="learned step vs MuJoCo timings")
     bench_args(b)
     b.set_defaults(func=_bench)
+
+    for name, what in (("bench-envs", "env steps per second of the envs, single and vectorised"),
+                       ("bench-collision", "face-contact detection timings at several radii")):
+        sub.add_parser(name, help=f"{what} (`fignet-gym {name} --help`)", add_help=False)
 
     t = sub.add_parser("train", help="train a simulator on trajectory files")
     t.add_argument("--data", required=True, nargs="+",
@@ -417,7 +434,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``fignet-gym`` script."""
-    args = build_parser().parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] in ("bench-envs", "bench-collision"):  # tools with their own options
+        args = argparse.Namespace(tool=argv[0], rest=argv[1:], func=_bench_tool)
+    else:
+        args = build_parser().parse_args(argv)
     return run_command(args.func, args)
 
 

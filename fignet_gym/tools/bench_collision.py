@@ -1,6 +1,6 @@
 """Micro-benchmark of :func:`fignet_gym.simulator.collision.find_face_contacts` on two typical scenes.
 
-``python -m fignet_gym.tools.bench_collision [--radii 0.005 0.01 0.02] [--repeats 100] [--threads 1]``
+``fignet-gym bench-collision [--radii 0.005 0.01 0.02] [--repeats 100] [--threads 1]``
 
 * ``pile``: 6 objects of 60 nodes (116 faces) each, in a 3 x 2 block resting on a 2-triangle
   floor, each touching (1 mm overlap) its neighbours: 8 cm objects, so ``d_c = 0.01`` is 12 %;
@@ -71,12 +71,14 @@ def _time(fn, repeats: int) -> tuple[float, float]:
     return statistics.median(wall), statistics.median(cpu)
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv: list[str] | None = None) -> None:
+    """``fignet-gym bench-collision``: face-contact detection timings at each radius."""
+    parser = argparse.ArgumentParser(prog="fignet-gym bench-collision",
+                                     description=__doc__.splitlines()[0])
     parser.add_argument("--radii", type=float, nargs="+", default=[0.005, 0.01, 0.02])
     parser.add_argument("--repeats", type=int, default=100)
     parser.add_argument("--threads", type=int, default=0, help="torch threads (0: default)")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
     rng = np.random.default_rng(0)

@@ -1,6 +1,6 @@
 """Benchmark of the Push and Toss environments with MuJoCo and learned dynamics.
 
-``python -m fignet_gym.tools.bench_envs [--envs push toss] [--nums 1 16 64] [--seconds 3] [--threads 1]``
+``fignet-gym bench-envs [--envs push toss] [--nums 1 16 64] [--seconds 3] [--threads 1]``
 
 For each environment and dynamics it reports environment steps per second of a single environment
 (``gym.make``) and of the batched vector environment at each ``N`` (``gym.make_vec(...,
@@ -134,7 +134,8 @@ def bench_batched_step(
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    """``fignet-gym bench-envs``: env steps per second, single and vectorised; the rows."""
+    p = argparse.ArgumentParser(prog="fignet-gym bench-envs", description=__doc__.split("\n\n")[0])
     p.add_argument("--envs", nargs="+", default=["push", "toss"], choices=list(ENV_IDS))
     p.add_argument(
         "--dynamics", nargs="+", default=["mujoco", "fignet"], choices=["mujoco", "fignet"]
@@ -171,7 +172,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                 kwargs["checkpoint"] = sim
             probe = gym.make(env_id, **kwargs).unwrapped
             per_step = round(
-                probe.nstep * probe.model.opt.timestep / 0.02
+                probe.frame_skip * probe.model.opt.timestep / 0.02
             )  # learned steps per env step
             probe.close()
             rate = bench_single(env_id, kwargs, args.seconds)
