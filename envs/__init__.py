@@ -6,8 +6,8 @@ Installed as ``fignet_gym.envs``. The ids are registered when Gymnasium is impor
     import gymnasium as gym
     import fignet_gym  # noqa: F401  (registers the environments)
 
-    env = gym.make("fignet_gym/Push-v0", dynamics="fignet", render_mode="rgb_array")
-    venv = gym.make_vec("fignet_gym/Push-v0", num_envs=16, vectorization_mode="vector_entry_point",
+    env = gym.make("fignet_gym/Push-v2", dynamics="fignet", render_mode="rgb_array")
+    venv = gym.make_vec("fignet_gym/Push-v2", num_envs=16, vectorization_mode="vector_entry_point",
                         dynamics="fignet", checkpoint="push")
 
 The stable-baselines3 adapter lives in :mod:`fignet_gym.envs.sb3` and is imported (with SB3) only

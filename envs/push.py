@@ -308,7 +308,8 @@ class PushEnv(MjDynamicsEnv):
         lv = float(np.clip(self.goal_level, 0.0, 1.0))
         own = (self.goal_distance_min, self.goal_distance, self.goal_yaw)
         easy = (min(e, o) for e, o in zip(EASY_GOAL, own, strict=True))
-        lo, hi, yaw = (e + lv * (o - e) for e, o in zip(easy, own, strict=True))
+        # o * lv + e * (1 - lv): exactly the env's own ranges at level 1 (e + lv * (o - e) is not)
+        lo, hi, yaw = (o * lv + e * (1.0 - lv) for e, o in zip(easy, own, strict=True))
         return lo, hi, yaw
 
     def _draw_goal(self, rng: np.random.Generator, xy: np.ndarray, yaw: float
@@ -343,8 +344,10 @@ class PushEnv(MjDynamicsEnv):
         xy, yaw = q[:, :2], yaw_of(q[:, 3:])
         c, s = np.cos(yaw), np.sin(yaw)
 
-        def to_obj(v: np.ndarray) -> np.ndarray:  # world -> object frame, float[B, 2]
-            return np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1]], -1)
+        rot = np.stack([np.stack([c, s], -1), np.stack([-s, c], -1)], -2)  # world -> object
+
+        def to_obj(v: np.ndarray) -> np.ndarray:  # float[B, 2]; matmul rounds as one env's R @ v
+            return (rot @ v[:, :, None])[:, :, 0]
 
         w_world = np.zeros((len(envs), 3))
         for i in range(len(envs)):  # MuJoCo's own rotation of the body-frame angular velocity

@@ -1,7 +1,7 @@
 """fignet_gym: FIGNet, a learned rigid-body simulator, as a drop-in replacement for MuJoCo.
 
 Importing the package loads the simulator core (torch, MuJoCo's model reader) and no RL stack; the
-environment ids (``fignet_gym/Push-v0``, ...) are registered with Gymnasium as soon as it is
+environment ids (``fignet_gym/Push-v2``, ...) are registered with Gymnasium as soon as it is
 imported (:mod:`fignet_gym.registration`). Package layout: ``docs/architecture.md``.
 """
 

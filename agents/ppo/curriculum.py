@@ -47,7 +47,7 @@ class GoalCurriculum(VecEnvWrapper):
         adapter(venv).venv.set_attr("resample_goal", True)
 
     def _set(self, level: float) -> None:
-        self.level = float(np.clip(level, 0.0, 1.0))
+        self.level = round(float(np.clip(level, 0.0, 1.0)), 9)  # 0.8, not 0.7999999999999999
         adapter(self.venv).venv.set_attr("goal_level", self.level)
 
     def reset(self) -> Any:

@@ -82,7 +82,7 @@ def evaluate_policy_on(
     seed: int = 0,
     *,
     checkpoint: Any = None,
-    env_id: str = PUSH_ID,
+    env_id: str | None = None,
     env_kwargs: Mapping[str, Any] | None = None,
     deterministic: bool = True,
     max_parallel: int = 16,
@@ -95,7 +95,8 @@ def evaluate_policy_on(
         n_episodes: episodes; episode ``k`` is seeded ``seed + k``.
         seed: first episode's seed.
         checkpoint: for ``"fignet"``: path or ``LearnedSimulator``.
-        env_id: a registered fignet_gym environment (default: the current Push version).
+        env_id: a registered fignet_gym environment (default: the policy's own ``env_id`` when
+            it has one, as a shipped policy does, else the current Push version).
         env_kwargs: further environment arguments (``shape``, ``friction`` ...).
         deterministic: use the policy's mean action.
         max_parallel: episodes stepped together (one batched dynamics call per step).
@@ -113,6 +114,8 @@ def evaluate_policy_on(
     """
     if n_episodes < 1:
         raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
+    if env_id is None:
+        env_id = getattr(policy, "env_id", None) or PUSH_ID
     n_par = min(n_episodes, max_parallel)
     venv = gym.make_vec(
         env_id,

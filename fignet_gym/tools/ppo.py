@@ -46,7 +46,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
             n_epochs=args.n_epochs,
             learning_rate=args.lr,
             gamma=args.gamma,
-            gae_lambda=args.gae_lambda,
+            gae_lambda=getattr(args, "gae_lambda", PPOConfig.gae_lambda),
             ent_coef=args.ent_coef,
             net_arch=net_arch,
             log_std_init=args.log_std_init,
@@ -68,8 +68,8 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
             observation=args.observation,
             shaping=args.shaping,
             success_bonus=args.success_bonus,
-            curriculum=args.curriculum,
-            precision=args.precision,
+            curriculum=bool(getattr(args, "curriculum", RunConfig.curriculum)),
+            precision=getattr(args, "precision", RunConfig.precision),
         )
     except ConfigError as err:
         raise ValueError(f"{OPTIONS.get(err.setting, err.setting)} {err.detail}") from None
