@@ -380,7 +380,7 @@ class PushEnv(MjDynamicsEnv):
         success = task.success_of(pos_err, yaw_err)
         out = task.out_of_workspace(states, np.stack([e.workspace_origin for e in envs]))
         reward = sum(terms.values())  # the env's term order, as the planners' task.reward
-        results: list[tuple[Any, float, bool, bool, dict[str, Any]]] = []
+        rows: list[tuple[float, bool, bool, dict[str, Any]]] = []
         for i, e in enumerate(envs):
             info: dict[str, Any] = {k: float(v[i]) for k, v in terms.items()}
             info.update(position_error=float(pos_err[i]), orientation_error=float(yaw_err[i]),
@@ -397,9 +397,9 @@ class PushEnv(MjDynamicsEnv):
             if diverged[i] is not None:
                 truncated = True
                 info["diverged"] = diverged[i]
-            results.append((None, float(reward[i]), terminated, truncated, info))
-        obs = self._observe_many(envs)
-        return [(obs[i], *r[1:]) for i, r in enumerate(results)]
+            rows.append((float(reward[i]), terminated, truncated, info))
+        obs = self._observe_many(envs)  # after any new goal: the policy sees the goal it now has
+        return [(o, *r) for o, r in zip(obs, rows, strict=True)]
 
     def _camera(self) -> int:
         return self._camera_id

@@ -29,6 +29,7 @@ from fignet_gym.dynamics.learned_ops import (  # noqa: F401  (CHUNK_NODES: re-ex
     blend_targets,
     describe_divergence,
     integrate_back,
+    kinematic_targets,
 )
 from fignet_gym.pretrained import load_pretrained
 from fignet_gym.simulator.geometry import (
@@ -181,12 +182,13 @@ class FIGNetDynamics(DynamicsBase):
 
     # ----------------------------------------------------------------- history
     def _current(self, info: _SceneInfo, datas: Sequence[mujoco.MjData]
-                 ) -> tuple[Tensor, Tensor, Tensor]:
+                 ) -> tuple[Tensor, Tensor, Tensor, np.ndarray]:
         """Current poses ``float[B, O, 7]``, dynamic linear (world) and angular (body) velocities
-        ``float[B, D, 3]`` of ``B`` datas."""
+        ``float[B, D, 3]`` of ``B`` datas, and the dynamic objects' ``qpos float64[B, D, 7]``."""
         qa = info.qadr[:, None] + np.arange(7)
         poses = np.repeat(info.scene.static_poses.double().cpu().numpy()[None], len(datas), 0)
-        poses[:, info.dyn] = np.stack([d.qpos[qa] for d in datas])
+        qpos = np.stack([d.qpos[qa] for d in datas])
+        poses[:, info.dyn] = qpos
         if len(info.kin):
             quat = np.stack([d.xquat[info.kin_body] for d in datas])
             use_x = (np.linalg.norm(quat, axis=-1) > 0.5)[..., None]  # zero until mj_forward
@@ -199,7 +201,7 @@ class FIGNetDynamics(DynamicsBase):
         f = lambda x: torch.as_tensor(x, dtype=torch.float32, device=self.simulator.device)  # noqa: E731
         p = f(poses)
         p[..., 3:] = quat_normalize(p[..., 3:])
-        return p, f(vel[..., :3]), f(vel[..., 3:])
+        return p, f(vel[..., :3]), f(vel[..., 3:]), qpos
 
     def _history(self, model: mujoco.MjModel, info: _SceneInfo, datas: Sequence[mujoco.MjData],
                  warn: bool = True) -> Tensor:
@@ -209,7 +211,7 @@ class FIGNetDynamics(DynamicsBase):
         H = self.simulator.config.history + 1
         for d in datas:
             mujoco.mj_normalizeQuat(model, d.qpos)  # as mj_step does: a zero quaternion -> identity
-        cur, lin, ang = self._current(info, datas)
+        cur, lin, ang, qpos = self._current(info, datas)
         B, n_obj = cur.shape[:2]
         hist = cur[None].repeat(H, 1, 1, 1)
         dyn_cur = cur[:, info.dyn].reshape(-1, 7)
@@ -229,7 +231,7 @@ class FIGNetDynamics(DynamicsBase):
         track = np.concatenate((info.dyn_track, info.kin_track))
         now = np.zeros((B, history.num_tracked(model), 7))
         now[:, track] = cur[:, objects].double().cpu().numpy()
-        now[:, info.dyn_track] = np.stack([d.qpos[info.qadr[:, None] + np.arange(7)] for d in datas])
+        now[:, info.dyn_track] = qpos
         userdata = np.stack([d.userdata for d in datas])
         counts = history.valid_counts(model, userdata, np.array([d.time for d in datas]), self.dt,
                                       now, np.stack([d.qvel for d in datas]))
@@ -449,7 +451,7 @@ class FIGNetDynamics(DynamicsBase):
             control[..., 3 * nm :].reshape(B, nstep, nm, 4)[:, :, info.kin_mocap])
         # The loop stays on the simulator's device: mocap targets go there once, poses come back
         # once after the last step (no numpy round trip per step; see tests/test_batching.py).
-        targets = self._targets_all(info, mocap_pos, mocap_quat, hist.device)  # [T, B*K, 7]
+        targets = kinematic_targets(mocap_pos, mocap_quat, hist.device)  # [T, B*K, 7]
         kin_rows = torch.as_tensor(
             (np.arange(B)[:, None] * info.scene.num_objects + info.kin[None]).ravel(),
             device=hist.device)
@@ -485,15 +487,6 @@ class FIGNetDynamics(DynamicsBase):
                 set_mocap(model, scratch, control[b, t])
                 mujoco.mj_getState(model, scratch, out[b, t], STATE_SPEC)
         return out
-
-    @staticmethod
-    def _targets_all(info: _SceneInfo, pos: np.ndarray, quat: np.ndarray, device: torch.device
-                     ) -> Tensor:
-        """Kinematic targets of every step on ``device``: ``pos float[B, T, K, 3]``,
-        ``quat float[B, T, K, 4]`` -> ``float[T, B*K, 7]`` (unit quaternions)."""
-        tgt = torch.as_tensor(np.concatenate((pos, quat), -1), dtype=torch.float32, device=device)
-        tgt = tgt.transpose(0, 1).reshape(pos.shape[1], -1, 7)
-        return torch.cat((tgt[..., :3], quat_normalize(tgt[..., 3:])), -1)
 
     def forget(self, data: mujoco.MjData) -> None:
         """Drop the pose history of ``data`` (its ``userdata`` frames): the next step reseeds it

@@ -51,6 +51,14 @@ def integrate_back(poses: Tensor, lin: Tensor, ang_body: Tensor, k: int, dt: flo
     return torch.cat((p, q), dim=-1)
 
 
+def kinematic_targets(pos: np.ndarray, quat: np.ndarray, device: torch.device) -> Tensor:
+    """Kinematic targets of every step on ``device``: ``pos float[B, T, K, 3]``,
+    ``quat float[B, T, K, 4]`` -> ``float[T, B*K, 7]`` (unit quaternions)."""
+    tgt = torch.as_tensor(np.concatenate((pos, quat), -1), dtype=torch.float32, device=device)
+    tgt = tgt.transpose(0, 1).reshape(pos.shape[1], -1, 7)
+    return torch.cat((tgt[..., :3], quat_normalize(tgt[..., 3:])), -1)
+
+
 def blend_targets(start: Tensor, target: Tensor, rows: Tensor, frac: float) -> Tensor:
     """``target float[N, 7]`` with ``rows bool[N]`` moved the fraction ``frac`` of the way from
     ``start float[N, 7]`` (positions linearly, quaternions as normalised linear blends: MuJoCo's
