@@ -385,16 +385,17 @@ def test_pushes_rest_on_the_floor_and_tosses_do_not(tmp_path: Path) -> None:
     assert not rests_on_floor(tosses)
 
 
-def test_sim2real_pushing_standin_command_runs_end_to_end(tmp_path: Path) -> None:
+def test_sim2real_pushing_standin_command_runs_end_to_end(tmp_path: Path, capsys) -> None:
     """The documented stand-in commands (docs/sim2real.md), on a tiny file and budget: a fine-tune
-    of ``push`` keeps its own gravity prior (a pushed object never flies), and the fit searches
-    no gravity."""
+    of ``push`` keeps its own gravity prior (a pushed object never flies), the fit searches
+    no gravity, and a fresh run says nothing about resuming."""
     raw, data, out = tmp_path / "raw", tmp_path / "standin.h5", tmp_path / "s2r"
     assert main(["mit-standin", "--out", str(raw), "--num", "10", "--seed", "0"]) == 0
     assert main(["import-mit", str(raw), "--out", str(data)]) == 0
     assert main(["sim2real", "--data", str(data), "--out", str(out), "--horizon", "10",
                  "--sizes", "2", "--config", "push-finetune", "--init", "push", "--budget", "2",
                  "--fit-evaluations", "3", "--fit-trajectories", "2", "--no-polish"]) == 0
+    assert "--resume" not in capsys.readouterr().out
     results = json.loads((out / "results.json").read_text())
     assert results["rests_on_floor"] and set(results["fignet"]) == {"2"}
     fit = json.loads((out / "mujoco_fit.json").read_text())

@@ -201,7 +201,9 @@ def _train(out: Path, sim_cfg: dict[str, Any], cfg: TrainConfig, trajs: list[Tra
     (out / "split.json").write_text(json.dumps(
         {"train": [t.name for t in trajs], "valid": [t.name for t in valid],
          "gravity": list(sim_cfg["gravity"]), "steps": cfg.steps}, indent=1))
-    state = Trainer(sim_cfg, cfg, trajs, valid, out, resume=True, init=init).run()
+    # Resumed only when begun: a fresh size is no "--resume: no last.pt" line in the user's log.
+    begun = (out / "last.pt").is_file()
+    state = Trainer(sim_cfg, cfg, trajs, valid, out, resume=begun, init=init).run()
     if state.step < cfg.steps:  # SIGINT / SIGTERM: last.pt is written, a new call resumes
         raise TrainingInterrupted(f"{out}: training interrupted at step {state.step} of "
                                   f"{cfg.steps}; call again to resume")
