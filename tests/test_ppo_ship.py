@@ -156,9 +156,9 @@ def test_shipped_push_ppo_under_sb3_evaluate_policy_scores_as_its_own_evaluation
     from fignet_gym.agents.ppo.eval import EVAL_SEED
 
     policy = load_policy("push-ppo")
-    assert (policy.env_id, policy.env_kwargs, policy.config.dynamics) == ("fignet_gym/Push-v1", {}, "fignet")
+    assert (policy.env_id, policy.env_kwargs, policy.config.dynamics) == ("fignet_gym/Push-v2", {}, "fignet")
     n = 4
-    venv = DummyVecEnv([lambda: gym.make("fignet_gym/Push-v1")] * n)
+    venv = DummyVecEnv([lambda: gym.make("fignet_gym/Push-v2")] * n)
     venv.seed(EVAL_SEED)  # env i's first reset is seeded EVAL_SEED + i: the evaluation's episode i
     returns, _ = evaluate_policy(policy, venv, n_eval_episodes=n, deterministic=True,
                                  return_episode_rewards=True)

@@ -63,8 +63,8 @@ def test_demo_quick_run_writes_its_summary(tmp_path) -> None:
         row = summary["mpc"]["episodes"][model][0]
         assert row["length"] == 3 and row["plan_cpu_seconds"] > 0
         assert 0.0 <= saved["mpc"]["summary"][model]["success_rate"] <= 1.0
-    # push-ppo was trained on Push-v1 (the same task under the pyramidal cone): the label says so.
-    assert summary["mpc"]["labels"]["ppo"] == "PPO (trained on FIGNet Push-v1)"
+    # push-ppo was trained on the demo's own Push-v2: the label names no other version.
+    assert summary["mpc"]["labels"]["ppo"] == "PPO (trained on FIGNet)"
     # The PPO row is the shipped policy acting in MuJoCo: the same three steps, replayed here.
     policy = load_policy(DEMO_POLICY)
     env = gym.make("fignet_gym/Push-v2")
