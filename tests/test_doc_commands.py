@@ -21,7 +21,9 @@ SECTIONS = ("## Real pushes (MIT Pushing): import protocol and geometry",
             "## Real pushes (MIT Pushing on ABS)", "## A stand-in pushing set")
 #: Budgets swapped for tiny ones (option -> value); every other option stays as written.
 SMALL = {"--budget": "2", "--num": "8", "--fit-evaluations": "3", "--fit-trajectories": "2",
-         "--pretrain": "4", "--pretrain-budget": "2"}
+         "--pretrain": "4", "--pretrain-budget": "2", "--episodes": "1"}
+#: A planner's budget cut to a few candidates (``plan`` takes the last of a repeated option).
+TINY_PLAN = ["--horizon", "2", "--population", "4", "--iterations", "1"]
 TINY_TRAINING = ('{"training.valid_every": 1, "training.batch_size": 1, '
                  '"training.valid_trajectories": 1}')
 
@@ -62,6 +64,8 @@ def _small(argv: list[str]) -> list[str]:
         i += 1
     if out[0] == "sim2real":  # tiny fits and training (the last of a repeated option wins)
         out += ["--fit-evaluations", "3", "--fit-trajectories", "2", "--set", TINY_TRAINING]
+    if out[0] == "plan":
+        out += TINY_PLAN
     if out[0] == "evaluate":
         out += ["--videos", "0"]
     return out
@@ -80,6 +84,6 @@ def test_the_documented_real_push_commands_run_as_written(tmp_path: Path,
             ran.append(small[0])
     assert ran.count("sim2real") >= 4 and "import-mit" in ran and "check-mit" in ran
     assert "sim2real-compare" in ran and (tmp_path / "runs" / "s2r_abs_compare" / "compare.md").is_file()
-    assert ran.count("evaluate") >= 3
+    assert ran.count("evaluate") >= 3 and ran.count("plan") == 2
     assert (tmp_path / "runs" / "s2r_abs" / "table.md").is_file()
     assert (tmp_path / "runs" / "s2r_abs_scratch" / "results.json").is_file()
