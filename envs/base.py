@@ -16,7 +16,6 @@ environments in one batched call:
 from __future__ import annotations
 
 import copy
-import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -87,13 +86,6 @@ class MjDynamicsEnv(gym.Env[np.ndarray, np.ndarray]):
         """Seconds per environment step: ``frame_skip * model.opt.timestep`` (as Gymnasium's
         MuJoCo environments define it)."""
         return self.frame_skip * float(self.model.opt.timestep)
-
-    @property
-    def nstep(self) -> int:
-        """Deprecated spelling of :attr:`frame_skip`."""
-        warnings.warn("env.nstep is deprecated: use env.frame_skip (MuJoCo timesteps per "
-                      "environment step)", DeprecationWarning, stacklevel=2)
-        return self.frame_skip
 
     def _init_state(self) -> None:
         """Per-instance state: ``MjData``, renderer, random generator (also for :meth:`_spawn`)."""

@@ -1,9 +1,8 @@
-"""``fignet_gym/Push-v2`` (and the deprecated ``Push-v0``, ``Push-v1``): planar pushing in the MIT
-Pushing setting."""
+"""``fignet_gym/Push-v2`` (and the deprecated ``Push-v1``): planar pushing in the MIT Pushing
+setting."""
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -27,7 +26,7 @@ from fignet_gym.mjcf import DEFAULT_CONE, push_object, push_scene_xml
 #: The easiest goals of a curriculum (``PushEnv.goal_level = 0``): distance range (m) and heading
 #: range (rad), just beyond the 1 cm success tolerance; each is capped by the env's own.
 EASY_GOAL = (0.011, 0.02, 0.1)
-#: The shipped push simulator trained on each friction cone's data (Push-v2 and Push-v0/v1).
+#: The shipped push simulator trained on each friction cone's data (Push-v2 and Push-v1).
 PRETRAINED_BY_CONE = {"elliptic": "push", "pyramidal": "push-pyramidal"}
 
 
@@ -86,9 +85,9 @@ class PushEnv(MjDynamicsEnv):
     ## Episode end
 
     Terminated on success (both errors within tolerance). Truncated at the registered time limit
-    (v0: 50 steps, 1 s; v1: 75 steps, 1.5 s), when the object leaves the workspace (``workspace``
-    m from its start, its height off by ``max_lift``, or tilted below ``min_upright``:
-    ``info["out_of_workspace"]``), or when the dynamics diverged.
+    (75 steps, 1.5 s), when the object leaves the workspace (``workspace`` m from its start, its
+    height off by ``max_lift``, or tilted below ``min_upright``: ``info["out_of_workspace"]``),
+    or when the dynamics diverged.
 
     ## Arguments
 
@@ -120,16 +119,16 @@ class PushEnv(MjDynamicsEnv):
     | width | ``480`` | rendered frame width (px) |
     | height | ``480`` | rendered frame height (px) |
     | dynamics_kwargs | ``None`` | extra dynamics arguments (e.g. fignet's ``max_distance``) |
-    | cone | ``"elliptic"`` | MuJoCo friction cone; ``"pyramidal"``: Push-v0/v1's physics |
+    | cone | ``"elliptic"`` | MuJoCo friction cone; ``"pyramidal"``: Push-v1's physics |
 
     ## Version History
 
-    * v2: isotropic friction (MuJoCo's elliptic cone); the task is v1's. Under v0/v1's pyramidal
+    * v2: isotropic friction (MuJoCo's elliptic cone); the task is v1's. Under v1's pyramidal
       cone a push turns the object by a different angle at each world heading (-1.9 to -12.4 deg
       for one push over 12 headings; -8.73 deg at every heading with the elliptic cone), so the
       learned model could only learn the average turn. ``dynamics="fignet"`` loads the ``push``
-      model trained on isotropic pushes; v0 and v1 keep the pyramidal cone and load
-      ``push-pyramidal``, the model trained on their physics. v0 and v1 are deprecated.
+      model trained on isotropic pushes; v1 keeps the pyramidal cone and loads
+      ``push-pyramidal``, the model trained on its physics. v1 is deprecated.
 
     * v1: a task a planner with a perfect model solves (MPC with MuJoCo as its model: see
       ``docs/experiments.md``, "Planning"). The tip starts 5 mm behind the object on the side
@@ -143,7 +142,7 @@ class PushEnv(MjDynamicsEnv):
       at 0.1 m/s with friction 0.25 slides v^2 / (2 mu g) = 2 mm, a fifth of the tolerance, so
       the object goes where the pusher puts it.
     * v0: the initial version (goal within 5 cm and 0.5 rad, success 1 cm and 0.1 rad, tip
-      anywhere around the object, 50 steps).
+      anywhere around the object, 50 steps); removed before the first release.
     """
 
     scene_type = "push"
@@ -263,13 +262,6 @@ class PushEnv(MjDynamicsEnv):
         super().__init__(
             model, dynamics, checkpoint, frame_skip, render_mode, width, height, dynamics_kwargs
         )
-
-    @property
-    def step_time(self) -> float:
-        """Deprecated spelling of :attr:`dt`."""
-        warnings.warn("PushEnv.step_time is deprecated: use env.dt", DeprecationWarning,
-                      stacklevel=2)
-        return self.dt
 
     def _init_state(self) -> None:
         super()._init_state()

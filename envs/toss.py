@@ -3,7 +3,6 @@ region of the floor."""
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -126,7 +125,6 @@ class TossEnv(MjDynamicsEnv):
     | width | ``480`` | rendered frame width (px) |
     | height | ``480`` | rendered frame height (px) |
     | dynamics_kwargs | ``None`` | extra dynamics arguments (e.g. fignet's ``max_distance``) |
-    | frame_skip | ``None`` | deprecated: ``settle_frame_skip`` (``env.frame_skip``: a whole step) |
     | cone | ``"elliptic"`` | MuJoCo friction cone; ``"pyramidal"``: Toss-v0's physics |
 
     ## Version History
@@ -159,14 +157,8 @@ class TossEnv(MjDynamicsEnv):
         width: int = 480,
         height: int = 480,
         dynamics_kwargs: dict[str, Any] | None = None,
-        frame_skip: int | None = None,
         cone: str = DEFAULT_CONE,
     ) -> None:
-        if frame_skip is not None:  # the old name, per learned step, not per env step
-            warnings.warn("TossEnv(frame_skip=...) is deprecated: it is now settle_frame_skip "
-                          "(timesteps per learned step of the settle); env.frame_skip is the "
-                          "timesteps of a whole env step", DeprecationWarning, stacklevel=2)
-            settle_frame_skip = frame_skip
         check_arguments(
             "TossEnv", floor_half_size=(floor_half_size, "positive"),
             settle_frame_skip=(settle_frame_skip, "count"),

@@ -4,7 +4,7 @@ A gradient-boosted tree regressor is given each push's exact generator parameter
 floor and tip friction, speed, approach angle, side and position of the contact) and predicts the
 object's yaw after 0.5 s. Under isotropic friction (the elliptic cone of ``generate`` since issue
 38) those parameters decide MuJoCo's trajectory in the object's frame completely; under MuJoCo's
-default pyramidal cone (``generate --cone pyramidal``, the data of Push-v0/v1) the world heading
+default pyramidal cone (``generate --cone pyramidal``, the data of Push-v1) the world heading
 ``object_yaw0`` changes the turn too (one push: -1.9 to -12.4 deg over 12 headings), so the yaw
 is not a function of these parameters and no learner can fit it. Its held-out R^2 against the
 number of training pushes says how hard the map is to learn from examples, independently of any

@@ -27,10 +27,6 @@ PUSH_V1_KWARGS: dict[str, Any] = {
 PUSH_V2_KWARGS: dict[str, Any] = {**PUSH_V1_KWARGS, "cone": "elliptic"}
 #: Registered ids: (entry point, vector entry point, episode step limit or None, arguments).
 ENV_SPECS: dict[str, tuple[str, str, int | None, dict[str, Any]]] = {
-    "fignet_gym/Push-v0": (
-        "fignet_gym.envs.push:PushEnv", "fignet_gym.envs.push:PushVectorEnv", 50,
-        {"cone": "pyramidal"},
-    ),
     "fignet_gym/Push-v1": (
         "fignet_gym.envs.push:PushEnv", "fignet_gym.envs.push:PushVectorEnv", 75,
         {**PUSH_V1_KWARGS, "cone": "pyramidal"},

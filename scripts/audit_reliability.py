@@ -92,7 +92,7 @@ def audit_vector_atomic() -> None:
     import fignet_gym  # noqa: F401
     from fignet_gym.envs.sb3 import SB3VecEnvAdapter
 
-    for env_id in ("fignet_gym/Push-v0", "fignet_gym/Toss-v0"):
+    for env_id in ("fignet_gym/Push-v2", "fignet_gym/Toss-v0"):
         for row in range(3):
             for adapter in (False, True):
                 v = gym.make_vec(env_id, num_envs=3, vectorization_mode="vector_entry_point")
@@ -308,7 +308,7 @@ def audit_checkpoints(tmp: Path, sealed_only: bool = False) -> None:
 
 # ----------------------------------------------------------------------------- class 6
 ENV_ARGS = {
-    "fignet_gym/Push-v0": [
+    "fignet_gym/Push-v2": [
         dict(max_speed=float("nan")),
         dict(max_speed=-1.0),
         dict(goal_distance=float("nan")),
@@ -330,7 +330,7 @@ ENV_ARGS = {
     "fignet_gym/Toss-v0": [
         dict(target_radius=float("nan")),
         dict(target_radius=-1.0),
-        dict(frame_skip=0),
+        dict(settle_frame_skip=0),
         dict(settle_steps=0),
         dict(floor_half_size=-1.0),
         dict(floor_half_size=float("nan")),
@@ -376,7 +376,7 @@ def audit_env_args() -> None:
         except Exception as e:  # noqa: BLE001
             out = classify_exc(e, (RuntimeError, gym.error.ResetNeeded))
         record("6 step before reset", cls_.__name__, out)
-    v = gym.make_vec("fignet_gym/Push-v0", num_envs=2, vectorization_mode="vector_entry_point")
+    v = gym.make_vec("fignet_gym/Push-v2", num_envs=2, vectorization_mode="vector_entry_point")
     try:
         v.step(np.zeros((2, 2)))
         out = "silent"

@@ -149,7 +149,7 @@ def test_dynamics_step_many_and_rollout_equal_single_scenes(push_sim) -> None:  
         np.testing.assert_array_equal(together[i], alone[0])
 
 
-@pytest.mark.parametrize(("env_id", "steps"), [("fignet_gym/Toss-v0", 2), ("fignet_gym/Push-v0", 20)])
+@pytest.mark.parametrize(("env_id", "steps"), [("fignet_gym/Toss-v0", 2), ("fignet_gym/Push-v1", 20)])
 def test_vector_env_with_shipped_model_reproduces_single_envs(env_id: str, steps: int) -> None:
     """Issue 16's case: sub-environment 1 of a Toss vector env was 8 cm off its same-seed single
     env after one toss, Push 0.009 after 20 steps; now they are identical."""

@@ -20,7 +20,7 @@ LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
 CODE_SPAN = re.compile(r"`([^`\n]+)`")
 # Repository paths written in code spans start with one of these folders (run, data and output
 # folders such as runs/ and data/ are the user's, not the repository's).
-ENV_ID = re.compile(r"-v\d+$")  # fignet_gym/Push-v0 is an environment id, not a path
+ENV_ID = re.compile(r"-v\d+$")  # fignet_gym/Push-v2 is an environment id, not a path
 TOP = ("fignet_gym/", "docs/", "envs/", "agents/", "examples/", "scripts/", "tests/")
 
 

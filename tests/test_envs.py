@@ -17,9 +17,9 @@ import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.envs import CubeTossEnv, PushEnv, TossEnv
 from fignet_gym.simulator.checkpoint import save
 
-ENV_IDS = ["fignet_gym/Push-v0", "fignet_gym/Push-v1", "fignet_gym/Toss-v0"]
+ENV_IDS = ["fignet_gym/Push-v2", "fignet_gym/Push-v1", "fignet_gym/Toss-v0"]
 #: Keep learned Toss steps cheap in tests: 3 learned steps per toss instead of 50.
-FAST = {"fignet_gym/Push-v0": {}, "fignet_gym/Push-v1": {}, "fignet_gym/Toss-v0": {"settle_steps": 3}}
+FAST = {"fignet_gym/Push-v2": {}, "fignet_gym/Push-v1": {}, "fignet_gym/Toss-v0": {"settle_steps": 3}}
 
 
 
@@ -161,7 +161,7 @@ def test_divergence_truncates_with_reason(env_id: str) -> None:
 
 
 @pytest.mark.parametrize(
-    "env_id,other", [("fignet_gym/Push-v0", "toss"), ("fignet_gym/Toss-v0", "push")]
+    "env_id,other", [("fignet_gym/Push-v2", "toss"), ("fignet_gym/Toss-v0", "push")]
 )
 def test_checkpoint_of_another_scene_type_is_refused(
     env_id: str, other: str, tmp_path: Any
@@ -176,11 +176,11 @@ def test_checkpoint_of_another_scene_type_is_refused(
 
 def test_unknown_push_shape_lists_valid_ones() -> None:
     with pytest.raises(ValueError, match="rect1"):
-        gym.make("fignet_gym/Push-v0", shape="banana")
+        gym.make("fignet_gym/Push-v2", shape="banana")
 
 
 def test_push_tip_moves_at_bounded_speed() -> None:
-    env = gym.make("fignet_gym/Push-v0")
+    env = gym.make("fignet_gym/Push-v2")
     obs, _ = env.reset(seed=0)
     lay = env.unwrapped.observation_layout
     tip0 = obs[lay["tip_xy"]].copy()
@@ -220,17 +220,17 @@ def test_user_dynamics_object_works_in_single_and_vector_envs() -> None:
             mujoco.mj_step(model, data, nstep)
 
     dyn = CountingMujoco()
-    env = gym.make("fignet_gym/Push-v0", dynamics=dyn)
+    env = gym.make("fignet_gym/Push-v2", dynamics=dyn)
     gym_check_env(env.unwrapped)
     venv = gym.make_vec(
-        "fignet_gym/Push-v0", num_envs=3, vectorization_mode="vector_entry_point", dynamics=dyn
+        "fignet_gym/Push-v2", num_envs=3, vectorization_mode="vector_entry_point", dynamics=dyn
     )
     venv.reset(seed=0)
     before = dyn.calls
     venv.step(np.zeros((3, 2)))
     assert dyn.calls == before + 3
     with pytest.raises(ValueError, match="only apply to dynamics given by name"):
-        gym.make("fignet_gym/Push-v0", dynamics=dyn, checkpoint="x.pt")
+        gym.make("fignet_gym/Push-v2", dynamics=dyn, checkpoint="x.pt")
 
 
 def test_push_reward_is_the_hand_computed_sum_of_its_terms_from_mujocos_own_state() -> None:

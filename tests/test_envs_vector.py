@@ -14,8 +14,8 @@ import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.envs import BatchedVectorEnv, SB3VecEnvAdapter, make_sb3_vec_env
 from fignet_gym.simulator.model import LearnedSimulator
 
-ENV_IDS = ["fignet_gym/Push-v0", "fignet_gym/Push-v1", "fignet_gym/Toss-v0"]
-FAST = {"fignet_gym/Push-v0": {}, "fignet_gym/Push-v1": {}, "fignet_gym/Toss-v0": {"settle_steps": 3}}
+ENV_IDS = ["fignet_gym/Push-v2", "fignet_gym/Push-v1", "fignet_gym/Toss-v0"]
+FAST = {"fignet_gym/Push-v2": {}, "fignet_gym/Push-v1": {}, "fignet_gym/Toss-v0": {"settle_steps": 3}}
 
 
 
@@ -85,7 +85,7 @@ def test_same_step_autoreset_reports_final_obs() -> None:
 
 def test_render_frames_for_each_sub_env() -> None:
     venv = gym.make_vec(
-        "fignet_gym/Push-v0",
+        "fignet_gym/Push-v2",
         num_envs=2,
         vectorization_mode="vector_entry_point",
         render_mode="rgb_array",
@@ -104,7 +104,7 @@ def test_sb3_adapter_and_ppo_smoke(dynamics: str) -> None:
     from stable_baselines3.common.vec_env import VecEnv
 
     vec = make_sb3_vec_env(
-        "fignet_gym/Push-v0", 2, max_episode_steps=5, **make_kwargs("fignet_gym/Push-v0", dynamics)
+        "fignet_gym/Push-v2", 2, max_episode_steps=5, **make_kwargs("fignet_gym/Push-v2", dynamics)
     )
     assert isinstance(vec, VecEnv) and isinstance(vec, SB3VecEnvAdapter)
     vec.seed(3)

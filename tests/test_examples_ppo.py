@@ -46,7 +46,7 @@ def test_defaults_are_the_shipped_policys_recipe() -> None:
 def test_tiny_run_then_resume_then_ship(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     ex = load_example()
     out = tmp_path / "run"
-    argv = ["--env", "fignet_gym/Push-v0", "--steps", "32", "--num-envs", "2", "--n-steps", "16",
+    argv = ["--env", "fignet_gym/Push-v1", "--steps", "32", "--num-envs", "2", "--n-steps", "16",
             "--final-episodes", "1", "--eval-every", "0", "--out", str(out)]
     ex.main(argv)
     assert json.loads((out / "final_eval.json").read_text())["timesteps"] == 32

@@ -112,7 +112,6 @@ def test_generated_scenes_use_the_elliptic_cone(kind: str) -> None:
 @pytest.mark.parametrize(("env_id", "cone", "pretrained"), [
     ("fignet_gym/Push-v2", mujoco.mjtCone.mjCONE_ELLIPTIC, "push"),
     ("fignet_gym/Push-v1", mujoco.mjtCone.mjCONE_PYRAMIDAL, "push-pyramidal"),
-    ("fignet_gym/Push-v0", mujoco.mjtCone.mjCONE_PYRAMIDAL, "push-pyramidal"),
     ("fignet_gym/Toss-v1", mujoco.mjtCone.mjCONE_ELLIPTIC, "toss"),
     ("fignet_gym/Toss-v0", mujoco.mjtCone.mjCONE_PYRAMIDAL, "toss"),
 ])

@@ -38,13 +38,13 @@ import json, sys
 import {first}
 import {second}
 import gymnasium as gym
-env = gym.make("fignet_gym/Push-v0", dynamics="mujoco")
+env = gym.make("fignet_gym/Push-v2", dynamics="mujoco")
 obs, _ = env.reset(seed=0)
 print(json.dumps({{"ids": sorted(k for k in gym.registry if k.startswith("fignet_gym/")),
                   "obs": list(obs.shape), "sb3": "stable_baselines3" in sys.modules}}))
 """)
     from fignet_gym.registration import ENV_SPECS
 
-    assert out["ids"] == sorted(ENV_SPECS) and "fignet_gym/Push-v0" in out["ids"]
+    assert out["ids"] == sorted(ENV_SPECS) and "fignet_gym/Push-v2" in out["ids"]
     assert len(out["obs"]) == 1 and out["obs"][0] > 0
     assert not out["sb3"]  # making an env does not load stable-baselines3 either

@@ -28,15 +28,15 @@ from fignet_gym.dynamics import (
     userdata_slice,
 )
 
-PUSH_IDS = ["fignet_gym/Push-v0", "fignet_gym/Push-v1"]
+PUSH_IDS = ["fignet_gym/Push-v1", "fignet_gym/Push-v2"]
 TOSS_FAST = {"settle_steps": 8}
 TINY_CEM = CEMConfig(horizon=3, population=6, elites=2, iterations=2, seed=0)
 TINY_MPPI = MPPIConfig(horizon=3, population=6, iterations=2, seed=0)
 
 
 def _rows(nstep: int, frame_skip: int) -> np.ndarray:
-    """Control rows of a model without mocap bodies (``float[1, T, 0]``): with them ``nstep``
-    counts MuJoCo timesteps (without, it keeps its former meaning for a deprecation period)."""
+    """Control rows ``float[1, T, 0]`` of a model without mocap bodies: ``T = nstep //
+    frame_skip`` recorded states of ``nstep`` MuJoCo timesteps."""
     return np.zeros((1, nstep // frame_skip, 0))
 
 

@@ -34,8 +34,8 @@ KICK = 3.0
 
 
 def _rows(nstep: int, frame_skip: int) -> np.ndarray:
-    """Control rows of a model without mocap bodies (``float[1, T, 0]``): with them ``nstep``
-    counts MuJoCo timesteps (without, it keeps its former meaning for a deprecation period)."""
+    """Control rows ``float[1, T, 0]`` of a model without mocap bodies: ``T = nstep //
+    frame_skip`` recorded states of ``nstep`` MuJoCo timesteps."""
     return np.zeros((1, nstep // frame_skip, 0))
 
 

@@ -24,7 +24,7 @@ from fignet_gym.agents.ppo.rundir import RunError
 from fignet_gym.agents.ppo.table import exploitation_gap, plot_curves, transfer_table
 from fignet_gym.cli import main
 
-PUSH = "fignet_gym/Push-v0"
+PUSH = "fignet_gym/Push-v1"
 #: 2 envs x 16 steps = 32 steps per PPO iteration, 2 minibatches of 16, 1 epoch.
 TINY = RunConfig(
     env_id=PUSH,

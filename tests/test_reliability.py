@@ -90,7 +90,7 @@ def _same(a: list[tuple], b: list[tuple]) -> bool:
 
 @pytest.mark.parametrize("sb3", [False, True], ids=["vector", "sb3"])
 @pytest.mark.parametrize("row", [0, 2])
-@pytest.mark.parametrize("env_id", ["fignet_gym/Push-v0", "fignet_gym/Toss-v0"])
+@pytest.mark.parametrize("env_id", ["fignet_gym/Push-v2", "fignet_gym/Toss-v0"])
 def test_a_rejected_vector_batch_changes_nothing(env_id: str, row: int, sb3: bool) -> None:
     """A NaN in any row is refused before any row is applied (was: earlier rows applied)."""
     kw = {"settle_steps": 2} if "Toss" in env_id else {}
@@ -133,7 +133,7 @@ def test_a_nan_in_a_row_being_reset_is_refused_too() -> None:
 
 
 def test_a_rejected_batch_with_the_learned_dynamics_changes_nothing() -> None:
-    venv = gym.make_vec("fignet_gym/Push-v0", num_envs=2, vectorization_mode="vector_entry_point",
+    venv = gym.make_vec("fignet_gym/Push-v2", num_envs=2, vectorization_mode="vector_entry_point",
                         dynamics="fignet", checkpoint=quiet_simulator())
     venv.reset(seed=1)
     venv.step(np.zeros((2, 2)))
@@ -443,7 +443,7 @@ PUSH_BAD = [("max_speed", float("nan")), ("max_speed", -1.0), ("goal_distance", 
             ("friction", 0.0), ("frame_skip", 0), ("frame_skip", -1), ("frame_skip", 2.5),
             ("workspace", 0.0), ("success_position", float("nan")), ("position_weight", float("inf")),
             ("tip_friction", float("nan")), ("width", 0)]
-TOSS_BAD = [("target_radius", float("nan")), ("frame_skip", 0), ("settle_steps", 0),
+TOSS_BAD = [("target_radius", float("nan")), ("settle_frame_skip", 0), ("settle_steps", 0),
             ("floor_half_size", -1.0), ("release_position", (0, 0, float("nan"))),
             ("release_velocity_low", (1.0,)), ("target_low", (2.0, 2.0)),
             ("distance_weight", float("nan")), ("height", -3)]
@@ -586,7 +586,7 @@ def test_import_movi_without_metadata_writes_nothing(tmp_path: Path,
 
 @pytest.mark.parametrize("seed", [1.5, -1, "a", [1.5, 2], True])
 def test_vector_reset_refuses_non_integer_seeds(seed: object) -> None:
-    venv = gym.make_vec("fignet_gym/Push-v0", num_envs=2, vectorization_mode="vector_entry_point")
+    venv = gym.make_vec("fignet_gym/Push-v2", num_envs=2, vectorization_mode="vector_entry_point")
     with pytest.raises(ValueError, match="seed"):
         venv.reset(seed=seed)
     venv.reset(seed=[3, None])

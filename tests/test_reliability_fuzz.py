@@ -19,9 +19,9 @@ import pytest
 import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.envs.sb3 import SB3VecEnvAdapter
 
-ENV_IDS = ["fignet_gym/Push-v0", "fignet_gym/Toss-v0"]
+ENV_IDS = ["fignet_gym/Push-v2", "fignet_gym/Toss-v0"]
 #: Valid steps per case (a learned Toss step is 75 learned steps: fewer of those).
-VALID_STEPS = {("fignet_gym/Push-v0", "mujoco"): 400, ("fignet_gym/Push-v0", "fignet"): 200,
+VALID_STEPS = {("fignet_gym/Push-v2", "mujoco"): 400, ("fignet_gym/Push-v2", "fignet"): 200,
                ("fignet_gym/Toss-v0", "mujoco"): 60, ("fignet_gym/Toss-v0", "fignet"): 12}
 HOSTILE_PER_VALID = 4
 

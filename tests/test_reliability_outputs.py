@@ -166,7 +166,7 @@ def _with(argv: list[str], change: list[str]) -> list[str]:
 
 @pytest.mark.parametrize("change,needle", [
     (["--planner", "random"], "planner 'idle' (now 'random')"),
-    (["--env", "fignet_gym/Push-v0"], "env 'fignet_gym/Push-v1' (now 'fignet_gym/Push-v0')"),
+    (["--env", "fignet_gym/Push-v2"], "env 'fignet_gym/Push-v1' (now 'fignet_gym/Push-v2')"),
     (["--seed", "7"], "seed 0 (now 7)"),
     (["--dynamics", "fignet"], "dynamics 'mujoco' (now 'fignet')"),
 ])

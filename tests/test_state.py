@@ -32,8 +32,8 @@ TOSS_FAST = {"settle_steps": 6}
 
 
 def _rows(nstep: int, frame_skip: int) -> np.ndarray:
-    """Control rows of a model without mocap bodies (``float[1, T, 0]``): with them ``nstep``
-    counts MuJoCo timesteps (without, it keeps its former meaning for a deprecation period)."""
+    """Control rows ``float[1, T, 0]`` of a model without mocap bodies: ``T = nstep //
+    frame_skip`` recorded states of ``nstep`` MuJoCo timesteps."""
     return np.zeros((1, nstep // frame_skip, 0))
 
 
@@ -210,12 +210,29 @@ def test_empty_batch_and_zero_steps_give_empty_arrays(backend: str) -> None:
     mujoco.mj_getState(model, d, state, STATE_SPEC)
     out = dyn.rollout(model, np.stack([state, state]), np.zeros((2, 0, 7)), frame_skip=10)
     assert out.shape == (2, 0, nstate)
-    # nstep counts timesteps; the former meaning (recorded states) where it cannot be the new
-    # one is still read, with a DeprecationWarning
+    # nstep counts timesteps: its pre-release meaning (recorded states) is refused, naming the fix
     control = np.concatenate((d.mocap_pos[0], d.mocap_quat[0]))[None, None].repeat(3, 1)
-    with pytest.warns(DeprecationWarning, match="nstep=30"):
-        old = dyn.rollout(model, state, control, nstep=3, frame_skip=10)
-    np.testing.assert_array_equal(old, dyn.rollout(model, state, control, nstep=30, frame_skip=10))
+    with pytest.raises(ValueError, match="not a multiple of frame_skip=10.*nstep=30"):
+        dyn.rollout(model, state, control, nstep=3, frame_skip=10)
+    with pytest.raises(ValueError, match="control has 20 rows.*pass nstep=200"):
+        dyn.rollout(model, state, control.repeat(7, 1)[:, :20], nstep=20, frame_skip=10)
+    assert dyn.rollout(model, state, control, nstep=30, frame_skip=10).shape == (1, 3, nstate)
+
+
+def test_nstep_counts_timesteps_without_control_rows() -> None:
+    """Without control (no mocap bodies) too: before the first release nstep meant recorded
+    states there."""
+    model = mujoco.MjModel.from_xml_string(
+        '<mujoco><option gravity="0 0 0" timestep="0.01"/><worldbody><body><freejoint/>'
+        '<geom type="sphere" size="0.05" mass="1"/></body></worldbody></mujoco>')
+    state = np.zeros(mujoco.mj_stateSize(model, STATE_SPEC))
+    state[4] = 1.0  # the identity quaternion of the ball, at rest at the origin
+    dyn = MujocoDynamics(nthread=1)
+    out = dyn.rollout(model, state, nstep=30, frame_skip=10)
+    assert out.shape == (1, 3, len(state))
+    np.testing.assert_allclose(out[0, :, 0], [0.1, 0.2, 0.3])  # time: 10 timesteps of 0.01 s each
+    np.testing.assert_array_equal(out, dyn.rollout(model, state, np.zeros((1, 3, 0)), nstep=30,
+                                                   frame_skip=10))
 
 
 @pytest.mark.parametrize("backend", ["mujoco", "fignet"])

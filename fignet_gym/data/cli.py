@@ -316,7 +316,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="MuJoCo steps of 2 ms per stored pose (default 10: dt = 0.02 s)")
     g.add_argument("--cone", choices=CONES, default=None,
                    help="MuJoCo friction cone (default elliptic: isotropic friction; pyramidal: "
-                        "the data of Push-v0/v1, Toss-v0 and the first shipped models); a scene "
+                        "the data of Push-v1, Toss-v0 and the first shipped models); a scene "
                         "keeps its own")
     g.add_argument("--sphere-subdivisions", type=int_at_least(0), default=1,
                    help="toss: icosphere level of spheres (1: 42 nodes)")

@@ -28,7 +28,6 @@ the protocol and the helpers every implementation shares; it imports no implemen
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Sequence
 from typing import Protocol, runtime_checkable
 
@@ -109,9 +108,8 @@ class Dynamics(Protocol):
         ``float64[B, T, nmocap * 7]`` mocap targets (each reached over ``frame_skip`` timesteps)
         -> ``float64[B, T, nstate]``, ``T = nstep // frame_skip`` (default ``nstep``: ``T``
         control rows). An empty batch or ``nstep = 0`` gives an empty array of that shape.
-        Deprecated: ``nstep`` as the number of recorded states, still read (with a warning)
-        where it cannot count timesteps, and without control rows when ``frame_skip > 1`` (give
-        ``float[B, T, 0]`` controls to a model without mocap bodies)."""
+        ``ValueError`` where ``nstep`` is not a multiple of ``frame_skip`` or ``T`` disagrees
+        with the control rows (neither 1 nor ``T``)."""
         ...
 
     def validate(self, model: mujoco.MjModel, nstep: int, scene_type: str = "") -> None:
@@ -126,7 +124,7 @@ def check_rollout_inputs(
     frame_skip: int = 1,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Validate and broadcast rollout inputs (``nstep``: MuJoCo timesteps, a multiple of
-    ``frame_skip``; default: one ``frame_skip`` per control row).
+    ``frame_skip``; default: one ``frame_skip`` per control row; ``ValueError`` otherwise).
 
     Returns ``float64[B, nstate]`` states, ``float64[B, T, ncontrol]`` controls and the number of
     recorded states ``T = nstep // frame_skip``.
@@ -136,20 +134,14 @@ def check_rollout_inputs(
     if nstep is not None:
         if isinstance(nstep, bool) or not isinstance(nstep, (int, np.integer)) or nstep < 0:
             raise ValueError(f"nstep must be an integer >= 0 (MuJoCo timesteps), got {nstep!r}")
-        rows = None if control is None else np.shape(control)[-2]
-        # The former meaning (recorded states) where it cannot be the new one (nstep not a
-        # multiple of frame_skip, or as many control rows as nstep) and, for a deprecation
-        # period, where nothing tells them apart (no control rows): give control rows, float[B,
-        # T, 0] without mocap bodies, to count timesteps there.
-        if frame_skip > 1 and (nstep % frame_skip or rows == nstep or rows is None):
-            warnings.warn(
-                f"Dynamics.rollout: nstep counts MuJoCo timesteps (as in mujoco.rollout); "
-                f"nstep={nstep} with frame_skip={frame_skip} is read as {nstep} recorded states, "
-                f"the former meaning: pass nstep={nstep * frame_skip} with control rows (float[B, "
-                f"{nstep}, 0] without mocap bodies)", DeprecationWarning,
-                stacklevel=3)
-        else:
-            nstep = nstep // frame_skip
+        # nstep once meant recorded states (before the first release): such a call shows here or
+        # as one control row per timestep below, and both errors name the fix rather than guess.
+        if nstep % frame_skip:
+            raise ValueError(
+                f"Dynamics.rollout: nstep={nstep} is not a multiple of frame_skip={frame_skip}: "
+                f"nstep counts MuJoCo timesteps (as in mujoco.rollout), so {nstep} recorded states "
+                f"are nstep={nstep * frame_skip}")
+        timesteps, nstep = int(nstep), int(nstep) // frame_skip
     nstate = mujoco.mj_stateSize(model, STATE_SPEC)
     ncontrol = mujoco.mj_stateSize(model, CONTROL_SPEC)
     state = np.asarray(initial_state, dtype=np.float64)
@@ -165,22 +157,24 @@ def check_rollout_inputs(
         if nstep is None:
             raise ValueError("rollout needs control or nstep")
         if ncontrol:
-            raise ValueError(
-                f"the model has mocap bodies: control float[B, nstep, {ncontrol}] is required"
-            )
+            raise ValueError(f"the model has mocap bodies: control float[B, nstep // frame_skip, "
+                             f"{ncontrol}] is required")
         control = np.zeros((state.shape[0], nstep, 0))
     control = np.asarray(control, dtype=np.float64)
     if control.ndim == 2:
         control = control[None]
     if control.ndim != 3 or control.shape[2] != ncontrol:
         raise ValueError(
-            f"control must be float[B, nstep, {ncontrol}] (mocap_pos then mocap_quat), "
-            f"got shape {np.shape(control)}"
+            f"control must be float[B, T, {ncontrol}] (mocap_pos then mocap_quat, one row per "
+            f"recorded state), got shape {np.shape(control)}"
         )
     nstep = control.shape[1] if nstep is None else int(nstep)
-    if control.shape[1] not in (1, nstep):
+    if control.shape[1] not in (1, nstep):  # only with nstep given: timesteps is set
+        rows = control.shape[1]
         raise ValueError(
-            f"control has {control.shape[1]} rows, nstep / frame_skip is {nstep} recorded states"
+            f"Dynamics.rollout: control has {rows} rows but nstep={timesteps} MuJoCo timesteps "
+            f"with frame_skip={frame_skip} record {nstep} states: pass nstep={rows * frame_skip} "
+            f"(nstep counts timesteps, as in mujoco.rollout) or {nstep} control rows"
         )
     B = max(state.shape[0], control.shape[0])
     if state.shape[0] not in (1, B) or control.shape[0] not in (1, B):

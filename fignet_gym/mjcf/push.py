@@ -164,7 +164,7 @@ def push_scene_xml(
             object by 5 degrees at 400 mm/s.
         cone: MuJoCo friction cone (:data:`fignet_gym.mjcf.assets.CONES`). ``"elliptic"`` makes
             friction isotropic, so a push gives the same motion in the object's frame at every
-            world heading; ``"pyramidal"`` is the scene of Push-v0/v1 and the first push data.
+            world heading; ``"pyramidal"`` is the scene of Push-v1 and the first push data.
     """
     obj = push_object(shape)
     tip_friction = friction if tip_friction is None else tip_friction

@@ -135,7 +135,7 @@ def _recordable(env: Any, env_id: str) -> str:
     xml = getattr(u, "mjcf", None)
     if not isinstance(xml, str) or getattr(u, "scene_type", "") != "push":
         raise CollectError(f"--env: {env_id} exposes no push scene MJCF (env.mjcf) to record; "
-                           "use fignet_gym/Push-v0, Push-v1 or Push-v2")
+                           "use fignet_gym/Push-v1 or Push-v2")
     plain = mujoco.MjModel.from_xml_string(xml)
     for name in _MODEL_FIELDS:
         if not np.array_equal(getattr(plain, name), getattr(u.model, name)):
