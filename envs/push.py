@@ -4,6 +4,7 @@ setting."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import mujoco
@@ -28,6 +29,30 @@ from fignet_gym.mjcf import DEFAULT_CONE, push_object, push_scene_xml
 EASY_GOAL = (0.011, 0.02, 0.1)
 #: The shipped push simulator trained on each friction cone's data (Push-v2 and Push-v1).
 PRETRAINED_BY_CONE = {"elliptic": "push", "pyramidal": "push-pyramidal"}
+
+
+@dataclass(frozen=True)
+class PushScene:
+    """What :class:`PushEnv` needs of its scene (:meth:`PushEnv._push_scene`).
+
+    Attributes:
+        mjcf, model: the scene's MJCF and its compiled model (room for the pose history).
+        outline: ``float[K, 2]`` counter-clockwise outline (m) of the object in its body frame.
+        rest_z: the object's resting height (m). object_body, tip_body: body names.
+        tip_bound: the tip stays within ``[-tip_bound, tip_bound]`` on x and y (m).
+        camera: the rendering camera's name (``""``: MuJoCo's free camera).
+        default_checkpoint: the learned model ``dynamics="fignet"`` loads by default.
+    """
+
+    mjcf: str
+    model: mujoco.MjModel
+    outline: np.ndarray
+    rest_z: float
+    object_body: str
+    tip_body: str
+    tip_bound: float
+    camera: str
+    default_checkpoint: str
 
 
 class PushEnv(MjDynamicsEnv):
@@ -200,12 +225,12 @@ class PushEnv(MjDynamicsEnv):
             tip_jitter=(tip_jitter, "nonnegative"), success_weight=(success_weight, "finite"),
             max_lift=(max_lift, "positive"), min_upright=(min_upright, "finite"),
             width=(width, "count"), height=(height, "count"))
-        obj = push_object(shape)
+        scene = self._push_scene(shape, friction, tip_friction, cone)
         #: The scene's MJCF (object at the origin; recorded trajectories store their poses).
-        self.mjcf = push_scene_xml(shape, friction=friction, tip_friction=tip_friction, cone=cone)
+        self.mjcf = scene.mjcf
         self.cone = cone
-        self.default_checkpoint = PRETRAINED_BY_CONE[cone]
-        model = compile_with_history(self.mjcf)
+        self.default_checkpoint = scene.default_checkpoint
+        model = scene.model
         self.shape = shape
         self.max_speed = float(max_speed)
         self.goal_distance, self.goal_yaw = float(goal_distance), float(goal_yaw)
@@ -226,19 +251,11 @@ class PushEnv(MjDynamicsEnv):
         #: (``info["goal_reached"]``) instead of terminating.
         self.goal_level = 1.0
         self.resample_goal = False
-        self._rest_z = obj.thickness / 2
-        tip_radius = float(
-            model.geom_size[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "tip"), 0]
-        )
-        # The tip starts this far from the object's frame origin: outside every corner.
-        self._tip_start = float(np.linalg.norm(obj.outline, axis=1).max()) + tip_radius + 0.005
-        floor = float(
-            model.geom_size[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "floor"), 0]
-        )
-        self._tip_bound = floor - 0.05
+        self._rest_z = scene.rest_z
+        self._tip_bound = scene.tip_bound
         self.task = PushTask(
             model,
-            obj.outline,
+            scene.outline,
             self._rest_z,
             max_speed=self.max_speed,
             dt=frame_skip * float(model.opt.timestep),
@@ -252,16 +269,35 @@ class PushEnv(MjDynamicsEnv):
             workspace=workspace,
             max_lift=max_lift,
             min_upright=min_upright,
+            object_body=scene.object_body,
+            tip_body=scene.tip_body,
         )
         self._qadr, self._dadr, self._tip_mocap = self.task.qadr, self.task.dadr, self.task.tip_mocap
-        self._camera_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, "top")
-        self._object_geom = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "object")
+        # The tip starts this far from the object's frame origin: outside every corner.
+        self._tip_start = (float(np.linalg.norm(scene.outline, axis=1).max())
+                           + self.task.tip_radius + 0.005)
+        self._camera_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, scene.camera)
+        body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, scene.object_body)
+        self._object_geom = int(model.body_geomadr[body])
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         n = layout_size(self.observation_layout)
         self.observation_space = spaces.Box(-np.inf, np.inf, (n,), np.float32)
         super().__init__(
             model, dynamics, checkpoint, frame_skip, render_mode, width, height, dynamics_kwargs
         )
+
+    def _push_scene(self, shape: str, friction: float, tip_friction: float | None,
+                    cone: str) -> PushScene:
+        """The shipped scene of ``shape``: object ``"object"``, tip ``"tip"``, camera ``"top"``;
+        the tip stays 5 cm inside the floor's edge."""
+        obj = push_object(shape)
+        mjcf = push_scene_xml(shape, friction=friction, tip_friction=tip_friction, cone=cone)
+        model = compile_with_history(mjcf)
+        floor = float(
+            model.geom_size[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "floor"), 0]
+        )
+        return PushScene(mjcf, model, obj.outline, obj.thickness / 2, "object", "tip",
+                         floor - 0.05, "top", PRETRAINED_BY_CONE[cone])
 
     def _init_state(self) -> None:
         super()._init_state()
@@ -397,7 +433,7 @@ class PushEnv(MjDynamicsEnv):
         return self._camera_id
 
     def _decorate(self, scene: mujoco.MjvScene) -> None:
-        # The goal: a translucent green copy of the object's mesh at the goal pose.
+        # The goal: a translucent green copy of the object's (first) geom at the goal pose.
         if scene.ngeom >= scene.maxgeom:
             return
         x, y, yaw = self.goal
@@ -408,15 +444,18 @@ class PushEnv(MjDynamicsEnv):
         mujoco.mju_quat2Mat(geom_rot, self.model.geom_quat[g])
         pos = np.array([x, y, self._rest_z + 0.0005]) + rot @ self.model.geom_pos[g]
         vg = scene.geoms[scene.ngeom]
+        kind = int(self.model.geom_type[g])
+        mesh = kind == int(mujoco.mjtGeom.mjGEOM_MESH)
         mujoco.mjv_initGeom(
             vg,
-            int(mujoco.mjtGeom.mjGEOM_MESH),
-            np.ones(3),
+            kind,
+            np.ones(3) if mesh else self.model.geom_size[g],
             pos,
             (rot @ geom_rot.reshape(3, 3)).ravel(),
             np.array([0.1, 0.8, 0.2, 0.4], np.float32),
         )
-        vg.dataid = 2 * int(self.model.geom_dataid[g])
+        if mesh:
+            vg.dataid = 2 * int(self.model.geom_dataid[g])
         scene.ngeom += 1
 
 

@@ -63,7 +63,7 @@ class PushTask(Task):
     """The push task of :class:`~fignet_gym.envs.push.PushEnv` on arrays of states.
 
     Args:
-        model: the push scene (object body ``"object"``, mocap tip ``"tip"``).
+        model: the push scene (a free body and a mocap pusher, named below).
         outline: ``float[K, 2]`` the object's outline in its frame (m).
         rest_z: the object's resting height (m).
         max_speed: tip speed (m/s) at ``|action| = 1`` per axis.
@@ -75,6 +75,8 @@ class PushTask(Task):
         workspace: truncation when the object is this far (m) from the workspace origin.
         max_lift: truncation when the object's height differs from ``rest_z`` by more (m).
         min_upright: truncation when the cosine of the object's tilt from upright is below this.
+        object_body, tip_body: the names of the pushed free body and of the pusher's mocap body
+            (the pusher's first geom gives its radius).
     """
 
     def __init__(
@@ -94,15 +96,16 @@ class PushTask(Task):
         workspace: float,
         max_lift: float,
         min_upright: float,
+        object_body: str = "object",
+        tip_body: str = "tip",
     ) -> None:
         self.layout = StateLayout(model)
-        body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "object")
-        tip_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "tip")
+        body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, object_body)
+        tip = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, tip_body)
         self.qadr = int(model.jnt_qposadr[model.body_jntadr[body]])
         self.dadr = int(model.jnt_dofadr[model.body_jntadr[body]])
-        self.tip_mocap = int(model.body_mocapid[tip_body])
-        tip_geom = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "tip")
-        self.tip_radius = float(model.geom_size[tip_geom, 0])
+        self.tip_mocap = int(model.body_mocapid[tip])
+        self.tip_radius = float(model.geom_size[model.body_geomadr[tip], 0])
         self.outline = np.asarray(outline, dtype=np.float64)
         self.rest_z = float(rest_z)
         self.max_speed, self.dt = float(max_speed), float(dt)

@@ -34,6 +34,12 @@ ENV_SPECS: dict[str, tuple[str, str, int | None, dict[str, Any]]] = {
     "fignet_gym/Push-v2": (
         "fignet_gym.envs.push:PushEnv", "fignet_gym.envs.push:PushVectorEnv", 75, PUSH_V2_KWARGS
     ),
+    # A user's MJCF: gym.make("fignet_gym/ScenePush-v0", mjcf=FILE, object=..., pusher=...)
+    # with Push-v1's task arguments; the friction cone is the MJCF's own.
+    "fignet_gym/ScenePush-v0": (
+        "fignet_gym.envs.scene_push:ScenePushEnv", "fignet_gym.envs.scene_push:ScenePushVectorEnv",
+        75, PUSH_V1_KWARGS,
+    ),
     "fignet_gym/Toss-v0": (
         "fignet_gym.envs.toss:TossEnv", "fignet_gym.envs.toss:TossVectorEnv", None,
         {"cone": "pyramidal"},
