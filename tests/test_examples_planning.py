@@ -54,3 +54,13 @@ def test_swap_example_pushes_towards_the_goal(tmp_path: Path) -> None:
     for xy in out["own_scene"].values():  # the box in the user's own scene moved along +x
         assert np.isfinite(xy).all() and xy[0] > 0.0
     assert (tmp_path / "swap.mp4").stat().st_size > 0
+
+
+def test_own_scene_example_goes_from_an_mjcf_file_to_a_planned_episode(tmp_path: Path) -> None:
+    """examples/own_scene.py at a tiny budget: data from the user's file, a trained checkpoint,
+    its evaluation against the MuJoCo pushes, and a planned episode on the registered scene env."""
+    out = load("own_scene").main(["--num", "4", "--steps", "2", "--episode-steps", "3",
+                                  "--planner-budget", "tiny", "--out", str(tmp_path)])
+    assert (tmp_path / "run" / "best.pt").is_file() and (tmp_path / "eval" / "metrics.json").is_file()
+    assert out["metrics"]["trajectories"] >= 1 and np.isfinite(out["metrics"]["translation_rmse_final"])
+    assert out["episode"]["steps"] == 3 and np.isfinite(out["episode"]["position_error"])
