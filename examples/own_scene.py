@@ -114,12 +114,12 @@ def plan_episode(mjcf: Path, obj: str, pusher: str, checkpoint: Path, max_steps:
                            env=env, **budget)
     obs, _ = env.reset(seed=0)
     info: dict = {}
-    for step in range(1, max_steps + 1):
+    steps, done = 0, False
+    while not done:
         action, _ = planner.predict(obs, deterministic=True)
         obs, _, terminated, truncated, info = env.step(action)
-        if terminated or truncated:
-            break
-    return {"success": bool(info.get("is_success", False)), "steps": step,
+        steps, done = steps + 1, terminated or truncated  # the time limit truncates
+    return {"success": bool(info.get("is_success", False)), "steps": steps,
             "position_error": float(info["position_error"]),
             "orientation_error": float(info["orientation_error"])}
 
