@@ -22,7 +22,7 @@ from fignet_gym.dynamics.base import (
     userdata_slice,
 )
 from fignet_gym.dynamics.factory import DYNAMICS_FACTORIES, DYNAMICS_LABELS, make_dynamics
-from fignet_gym.dynamics.history import compile_with_history
+from fignet_gym.dynamics.history import compile_with_history, with_history
 from fignet_gym.dynamics.learned import FIGNetDynamics
 from fignet_gym.dynamics.mujoco import MujocoDynamics
 
@@ -30,6 +30,6 @@ __all__ = [
     "CONTROL_SPEC", "DYNAMICS_FACTORIES", "DYNAMICS_LABELS", "PHYSICS_SPEC", "STATE_SPEC", "DivergenceError",
     "Dynamics", "DynamicsBase",
     "FIGNetDynamics", "MujocoDynamics", "check_rollout_inputs", "make_dynamics", "rollout_loop",
-    "join_state", "set_mocap", "split_state", "state_offsets", "compile_with_history",
+    "join_state", "set_mocap", "split_state", "state_offsets", "compile_with_history", "with_history",
     "userdata_slice",
 ]

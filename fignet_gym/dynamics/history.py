@@ -20,11 +20,15 @@ before the first step); ``qvel`` is each free joint's velocity at ``time``, so t
 velocity (a released object) is told from the recorded one. A model compiled without room
 for it (``model.nuserdata < history_size(model)``) still steps: the learned dynamics then
 re-seeds its history from ``qpos``/``qvel`` at every call. :func:`compile_with_history`
-compiles MJCF with the room.
+compiles MJCF with the room; :func:`with_history` gives an already compiled model (one loaded
+with ``MjModel.from_xml_path``) the room.
 """
 
 from __future__ import annotations
 
+import functools
+import os
+import tempfile
 import weakref
 
 import mujoco
@@ -87,6 +91,51 @@ def compile_with_history(xml: str) -> mujoco.MjModel:
         return model
     spec.nuserdata = need
     return spec.compile()
+
+
+def _binary(model: mujoco.MjModel) -> bytearray:
+    """``model`` in MuJoCo's binary (MJB) format."""
+    buf = np.zeros(mujoco.mj_sizeModel(model), np.uint8)
+    mujoco.mj_saveModel(model, None, buf)
+    return bytearray(buf.tobytes())
+
+
+@functools.lru_cache(maxsize=1)
+def _nuserdata_offset() -> int:
+    """Byte offset of ``nuserdata`` in an MJB file of this MuJoCo build: the one place where two
+    models differing only in ``nuserdata`` differ (measured, so no version's layout is assumed)."""
+    spec = mujoco.MjSpec.from_string("<mujoco><worldbody/></mujoco>")
+    probes = []
+    for n in (0, 0x1234567):
+        spec.nuserdata = n
+        probes.append(np.frombuffer(bytes(_binary(spec.compile())), np.uint8))
+    diff = np.flatnonzero(probes[0] != probes[1])
+    offset = int(diff[0]) - int(diff[0]) % 4
+    if diff.max() >= offset + 4:
+        raise RuntimeError("this MuJoCo build's model files differ in more than nuserdata")
+    return offset
+
+
+def with_history(model: mujoco.MjModel) -> mujoco.MjModel:
+    """``model`` itself if it has room for the pose history, else a copy that has it.
+
+    For a model already compiled (``MjModel.from_xml_path``, a binary file): MuJoCo fixes a
+    model's sizes when it compiles, so the copy goes through its binary format with only
+    ``nuserdata`` changed; the physics are the same. Make ``MjData`` from the returned model.
+    """
+    need = history_size(model)
+    if model.nuserdata >= need:
+        return model
+    buf, at = _binary(model), _nuserdata_offset()
+    if int.from_bytes(buf[at:at + 4], "little") != model.nuserdata:
+        raise RuntimeError("cannot locate nuserdata in this model's binary form: compile its MJCF "
+                           "with fignet_gym.dynamics.compile_with_history instead")
+    buf[at:at + 4] = int(need).to_bytes(4, "little")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "model.mjb")
+        with open(path, "wb") as f:
+            f.write(buf)
+        return mujoco.MjModel.from_binary_path(path)
 
 
 def tracked_poses(model: mujoco.MjModel, qpos: np.ndarray, mocap: np.ndarray) -> np.ndarray:

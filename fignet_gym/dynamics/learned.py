@@ -224,8 +224,9 @@ class FIGNetDynamics(DynamicsBase):
             if warn and model not in self._warned:
                 self._warned.add(model)
                 warnings.warn("FIGNetDynamics: the model has no room for the pose history in "
-                              "userdata, so every call restarts it from qpos/qvel; compile it "
-                              "with fignet_gym.dynamics.history.compile_with_history", stacklevel=4)
+                              "userdata, so every call restarts it from qpos/qvel; use model = "
+                              "fignet_gym.dynamics.with_history(model) and MjData(model)",
+                              stacklevel=4)
             return hist
         objects = np.concatenate((info.dyn, info.kin))
         track = np.concatenate((info.dyn_track, info.kin_track))
