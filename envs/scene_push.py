@@ -105,6 +105,7 @@ class ScenePushEnv(PushEnv):
 
     def _push_scene(self, shape: str, friction: float, tip_friction: float | None,
                     cone: str) -> PushScene:
+        # Imported here: the data layer (h5py, trimesh) loads only for a user's scene.
         from fignet_gym.data.scene_generator import SceneConfig, check_scene
 
         path, obj, pusher, tip_bound, camera = self._scene_args
