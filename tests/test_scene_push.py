@@ -147,3 +147,25 @@ def test_outlines_of_round_primitives_span_their_extent(tmp_path: Path, geom: st
     outline = object_outline(env.model, "crate")
     extent = outline.max(axis=0) - outline.min(axis=0)
     np.testing.assert_allclose(extent, (width, depth), rtol=1e-6)
+
+
+def test_plan_runs_on_a_users_scene_through_env_kwargs(tmp_path: Path, capsys) -> None:
+    import json
+
+    from fignet_gym.cli import main
+
+    kwargs = json.dumps({"mjcf": str(_scene(tmp_path)), "object": "crate", "pusher": "finger"})
+    out = tmp_path / "plan"
+    argv = ["plan", "--env", "fignet_gym/ScenePush-v0", "--env-kwargs", kwargs, "--episodes", "1",
+            "--horizon", "2", "--population", "4", "--iterations", "1", "--out", str(out)]
+    assert main(argv) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["episodes"] == 1 and summary["env_kwargs"]["object"] == "crate"
+    # The env's own refusal, and an argument plan sets itself, are one error line each.
+    capsys.readouterr()
+    bad = json.dumps({"mjcf": str(_scene(tmp_path)), "object": "crate", "pusher": "crate"})
+    assert main([*argv[:4], bad, "--out", str(tmp_path / "p2")]) == 2
+    assert "pusher 'crate' is not a mocap body" in capsys.readouterr().err
+    assert main([*argv[:4], '{"dynamics": "fignet"}', "--out", str(tmp_path / "p3")]) == 2
+    err = capsys.readouterr().err
+    assert "dynamics cannot be set" in err and len(err.strip().splitlines()) == 1

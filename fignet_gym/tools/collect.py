@@ -93,18 +93,10 @@ _FIXED_ENV_ARGS = ("dynamics", "checkpoint", "dynamics_kwargs", "render_mode", "
 def env_kwargs(text: str) -> dict[str, Any]:
     """``--env-kwargs``' JSON object as a dict; :class:`CollectError` if it is not one, or sets an
     argument the episodes fix (:data:`_FIXED_ENV_ARGS`)."""
-    try:
-        kwargs = json.loads(text)
-    except ValueError as err:
-        raise CollectError(f"--env-kwargs: not JSON ({err}); give an object such as "
-                           "'{\"goal_yaw\": 0.8}'") from None
-    if not isinstance(kwargs, dict):
-        raise CollectError(f"--env-kwargs: must be a JSON object of env arguments, got {text!r}")
-    fixed = sorted(set(kwargs) & set(_FIXED_ENV_ARGS))
-    if fixed:
-        raise CollectError(f"--env-kwargs: {', '.join(fixed)} cannot be set (collect acts in "
-                           "MuJoCo, unrendered)")
-    return kwargs
+    from fignet_gym.tools.plan import parse_env_kwargs
+
+    return parse_env_kwargs(text, _FIXED_ENV_ARGS, "collect acts in MuJoCo, unrendered",
+                            CollectError)
 
 
 def _make_env(env_id: str, kwargs: dict[str, Any]) -> Any:

@@ -19,6 +19,7 @@ import argparse
 import json
 import os
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -65,8 +66,31 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--population", type=int, help="override the preset candidates per iteration")
     p.add_argument("--iterations", type=int, help="override the preset iterations")
     p.add_argument("--replan-every", type=int, help="override the preset re-planning period")
+    p.add_argument("--env-kwargs", default="{}", metavar="JSON",
+                   help="env arguments as a JSON object, e.g. ScenePush-v0's "
+                        "'{\"mjcf\": \"my_scene.xml\", \"object\": \"crate\", \"pusher\": \"finger\"}'")
     p.add_argument("--threads", type=int_at_least(1), default=1,
                    help="torch and MuJoCo rollout threads")
+
+
+def parse_env_kwargs(text: str, fixed: Sequence[str], why: str,
+                     error: type[ValueError]) -> dict[str, Any]:
+    """``--env-kwargs``' JSON object as a dict; ``error`` (one line) if it is not one or sets an
+    argument of ``fixed`` (``why``: what fixes them)."""
+    try:
+        kwargs = json.loads(text)
+    except ValueError as err:
+        raise error(f"--env-kwargs: not JSON ({err}); give an object such as "
+                    "'{\"goal_yaw\": 0.8}'") from None
+    if not isinstance(kwargs, dict):
+        raise error(f"--env-kwargs: must be a JSON object of env arguments, got {text!r}")
+    if taken := sorted(set(kwargs) & set(fixed)):
+        raise error(f"--env-kwargs: {', '.join(taken)} cannot be set ({why})")
+    return kwargs
+
+
+#: Env arguments ``plan --env-kwargs`` may not set.
+PLAN_FIXED_ENV_ARGS = ("dynamics", "render_mode", "width", "height")
 
 
 def check_arguments(args: argparse.Namespace) -> None:
@@ -316,14 +340,19 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if unknown := unknown_env(args.env):
         raise PlanError(unknown)
     out = Path(args.out)
-    env_kwargs = {"dynamics": args.act_dynamics}
+    extra = parse_env_kwargs(getattr(args, "env_kwargs", "{}"), PLAN_FIXED_ENV_ARGS,
+                             "--act-dynamics and --videos set them", PlanError)
+    env_kwargs = {"dynamics": args.act_dynamics, **extra}
     render = {"render_mode": "rgb_array", "width": 320, "height": 320} if args.videos else {}
     try:
         env = gym.make(args.env, **render, **env_kwargs)
     except TypeError as err:  # another package's env (CartPole) takes none of these arguments
-        raise PlanError(f"--env: {args.env} takes no dynamics= argument (plannable envs: "
+        what = f"does not take all of {sorted(env_kwargs)}" if extra else "takes no dynamics= argument"
+        raise PlanError(f"--env: {args.env} {what} (plannable envs: "
                         f"{fignet_env_ids()} or a user's env with dynamics= and a task): {err}"
                         ) from None
+    except ValueError as err:  # an env refusing an argument (ScenePush-v0 without its file)
+        raise PlanError(f"--env {args.env}: {err}") from None
     if not isinstance(getattr(env.unwrapped, "task", None), Task):
         raise PlanError(f"--env: {args.env} exposes no task to plan (env.task: a "
                         f"fignet_gym.envs.tasks.Task); {type(env.unwrapped).__name__} has none")
@@ -345,7 +374,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     meta = {"env": args.env, "planner": args.planner, "dynamics": args.dynamics,
             "act_dynamics": args.act_dynamics, "checkpoint": args.checkpoint,
             "config": config.__dict__ if config is not None else None, "seed": args.seed,
-            "threads": args.threads, "software": software()}
+            "threads": args.threads, "software": software(),
+            **({"env_kwargs": extra} if extra else {})}  # runs before the option: no key
     meta = json.loads(json.dumps(meta))  # as stored: tuples become lists
     with output_lock(out):
         rows = prepare_run_folder(out, args, meta)
