@@ -16,6 +16,9 @@ from fignet_gym.cli import main
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "sim2real.md"
 SAMPLE = Path(__file__).parent / "data" / "mit_sample"
+#: How the docs' commands end the path of a folder of raw MIT pushes (the shared ABS set, or a
+#: placeholder); each is replaced by the shipped sample.
+DOC_PUSH_FOLDERS = ("mit-push-abs/pushes", "path/to/pushes")
 #: The sections whose code blocks are run, in the docs' order.
 SECTIONS = ("## Real pushes (MIT Pushing): import protocol and geometry",
             "## Real pushes (MIT Pushing on ABS)", "## A stand-in pushing set")
@@ -48,7 +51,7 @@ def _small(argv: list[str]) -> list[str]:
     out, i = [], 0
     while i < len(argv):
         a = argv[i]
-        if a in ("../shared/data/mit-push-abs/pushes", "path/to/pushes"):
+        if a.endswith(DOC_PUSH_FOLDERS):  # the docs' folders of raw pushes: never read here
             a = str(SAMPLE)
         if a in SMALL:
             out += [a, SMALL[a]]
