@@ -16,6 +16,7 @@ refused, since no shipped model knows a user's objects.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from pathlib import Path
 from typing import Any
@@ -113,8 +114,7 @@ class ScenePushEnv(PushEnv):
         raw = mujoco.MjModel.from_xml_string(cfg.mjcf)
         # Refuses what FIGNet cannot represent, an object that is not a free body; warns on the
         # pyramidal cone. The env's step is whole timesteps, so any dt it checks divides.
-        check_scene(SceneConfig(cfg.mjcf, dt=float(raw.opt.timestep), target=obj,
-                                source=str(path)))
+        check_scene(dataclasses.replace(cfg, dt=float(raw.opt.timestep)))
         tip = mujoco.mj_name2id(raw, mujoco.mjtObj.mjOBJ_BODY, pusher)
         if tip < 0 or raw.body_mocapid[tip] < 0:
             mocap = [mujoco.mj_id2name(raw, mujoco.mjtObj.mjOBJ_BODY, b) or f"body{b}"
