@@ -171,6 +171,8 @@ class PushEnv(MjDynamicsEnv):
     """
 
     scene_type = "push"
+    #: The task class; a subclass adds its own arguments by :meth:`_task_arguments`.
+    task_class: type[PushTask] = PushTask
     observation_layout = layout(
         ("object_xy", 2),
         ("object_yaw", 2),
@@ -253,7 +255,7 @@ class PushEnv(MjDynamicsEnv):
         self.resample_goal = False
         self._rest_z = scene.rest_z
         self._tip_bound = scene.tip_bound
-        self.task = PushTask(
+        self.task = self.task_class(
             model,
             scene.outline,
             self._rest_z,
@@ -271,6 +273,7 @@ class PushEnv(MjDynamicsEnv):
             min_upright=min_upright,
             object_body=scene.object_body,
             tip_body=scene.tip_body,
+            **self._task_arguments(),
         )
         self._qadr, self._dadr, self._tip_mocap = self.task.qadr, self.task.dadr, self.task.tip_mocap
         # The tip starts this far from the object's frame origin: outside every corner.
@@ -278,7 +281,8 @@ class PushEnv(MjDynamicsEnv):
                            + self.task.tip_radius + 0.005)
         self._camera_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, scene.camera)
         body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, scene.object_body)
-        self._object_geom = int(model.body_geomadr[body])
+        first = int(model.body_geomadr[body])
+        self._object_geoms = range(first, first + int(model.body_geomnum[body]))
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         n = layout_size(self.observation_layout)
         self.observation_space = spaces.Box(-np.inf, np.inf, (n,), np.float32)
@@ -298,6 +302,10 @@ class PushEnv(MjDynamicsEnv):
         )
         return PushScene(mjcf, model, obj.outline, obj.thickness / 2, "object", "tip",
                          floor - 0.05, "top", PRETRAINED_BY_CONE[cone])
+
+    def _task_arguments(self) -> dict[str, Any]:
+        """Arguments of :attr:`task_class` beyond :class:`PushTask`'s (none here)."""
+        return {}
 
     def _init_state(self) -> None:
         super()._init_state()
@@ -404,15 +412,14 @@ class PushEnv(MjDynamicsEnv):
         states = np.stack([e.get_state() for e in envs])
         goals = np.stack([e.goal for e in envs])
         terms = task.reward_terms(states, goals, np.stack(actions))
-        pos_err, yaw_err = task.errors(states, goals)
-        success = task.success_of(pos_err, yaw_err)
+        measures = task.measures(states, goals)
+        success = task.is_success(states, goals)
         out = task.out_of_workspace(states, np.stack([e.workspace_origin for e in envs]))
         reward = sum(terms.values())  # the env's term order, as the planners' task.reward
         rows: list[tuple[float, bool, bool, dict[str, Any]]] = []
         for i, e in enumerate(envs):
             info: dict[str, Any] = {k: float(v[i]) for k, v in terms.items()}
-            info.update(position_error=float(pos_err[i]), orientation_error=float(yaw_err[i]),
-                        is_success=bool(success[i]))
+            info.update({k: float(v[i]) for k, v in measures.items()}, is_success=bool(success[i]))
             terminated, truncated = bool(success[i]), bool(out[i])
             if truncated:
                 info["out_of_workspace"] = True
@@ -433,30 +440,30 @@ class PushEnv(MjDynamicsEnv):
         return self._camera_id
 
     def _decorate(self, scene: mujoco.MjvScene) -> None:
-        # The goal: a translucent green copy of the object's (first) geom at the goal pose.
-        if scene.ngeom >= scene.maxgeom:
-            return
+        # The goal: a translucent green copy of the object's geoms at the goal pose.
         x, y, yaw = self.goal
         c, s = np.cos(yaw), np.sin(yaw)
         rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        g = self._object_geom
-        geom_rot = np.zeros(9)
-        mujoco.mju_quat2Mat(geom_rot, self.model.geom_quat[g])
-        pos = np.array([x, y, self._rest_z + 0.0005]) + rot @ self.model.geom_pos[g]
-        vg = scene.geoms[scene.ngeom]
-        kind = int(self.model.geom_type[g])
-        mesh = kind == int(mujoco.mjtGeom.mjGEOM_MESH)
-        mujoco.mjv_initGeom(
-            vg,
-            kind,
-            np.ones(3) if mesh else self.model.geom_size[g],
-            pos,
-            (rot @ geom_rot.reshape(3, 3)).ravel(),
-            np.array([0.1, 0.8, 0.2, 0.4], np.float32),
-        )
-        if mesh:
-            vg.dataid = 2 * int(self.model.geom_dataid[g])
-        scene.ngeom += 1
+        for g in self._object_geoms:
+            if scene.ngeom >= scene.maxgeom:
+                return
+            geom_rot = np.zeros(9)
+            mujoco.mju_quat2Mat(geom_rot, self.model.geom_quat[g])
+            pos = np.array([x, y, self._rest_z + 0.0005]) + rot @ self.model.geom_pos[g]
+            vg = scene.geoms[scene.ngeom]
+            kind = int(self.model.geom_type[g])
+            mesh = kind == int(mujoco.mjtGeom.mjGEOM_MESH)
+            mujoco.mjv_initGeom(
+                vg,
+                kind,
+                np.ones(3) if mesh else self.model.geom_size[g],
+                pos,
+                (rot @ geom_rot.reshape(3, 3)).ravel(),
+                np.array([0.1, 0.8, 0.2, 0.4], np.float32),
+            )
+            if mesh:
+                vg.dataid = 2 * int(self.model.geom_dataid[g])
+            scene.ngeom += 1
 
 
 class PushVectorEnv(SingleEnvVectorEnv):

@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
@@ -27,6 +27,9 @@ import numpy as np
 from fignet_gym.dynamics import compile_with_history
 from fignet_gym.envs.push import PushEnv, PushScene
 from fignet_gym.envs.vector import SingleEnvVectorEnv
+
+if TYPE_CHECKING:
+    from fignet_gym.data.scene_generator import SceneConfig
 
 #: PushEnv arguments that build the shipped scene; a user's scene keeps its MJCF's own.
 SCENE_OWNED = ("shape", "friction", "tip_friction", "cone")
@@ -95,7 +98,7 @@ class ScenePushEnv(PushEnv):
         if owned:
             raise ValueError(f"ScenePushEnv: {', '.join(owned)} come from the MJCF file; edit "
                              f"{mjcf} instead")
-        if dynamics == "fignet" and checkpoint is None:
+        if dynamics == "fignet" and checkpoint is None and not self._default_checkpoint:
             raise ValueError("ScenePushEnv: dynamics='fignet' needs checkpoint=..., a model "
                              "trained on this scene (fignet-gym generate scene --mjcf FILE, "
                              "then fignet-gym train)")
@@ -107,10 +110,10 @@ class ScenePushEnv(PushEnv):
     def _push_scene(self, shape: str, friction: float, tip_friction: float | None,
                     cone: str) -> PushScene:
         # Imported here: the data layer (h5py, trimesh) loads only for a user's scene.
-        from fignet_gym.data.scene_generator import SceneConfig, check_scene
+        from fignet_gym.data.scene_generator import check_scene
 
         path, obj, pusher, tip_bound, camera = self._scene_args
-        cfg = SceneConfig.from_file(path, target=obj)  # one-line errors for a file MuJoCo refuses
+        cfg = self._scene_config()
         raw = mujoco.MjModel.from_xml_string(cfg.mjcf)
         # Refuses what FIGNet cannot represent, an object that is not a free body; warns on the
         # pyramidal cone. The env's step is whole timesteps, so any dt it checks divides.
@@ -129,7 +132,18 @@ class ScenePushEnv(PushEnv):
         body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, obj)
         rest_z = float(model.qpos0[model.jnt_qposadr[model.body_jntadr[body]] + 2])
         return PushScene(cfg.mjcf, model, object_outline(model, obj), rest_z, obj, pusher,
-                         tip_bound, camera, default_checkpoint="")
+                         tip_bound, camera, default_checkpoint=self._default_checkpoint)
+
+    #: The learned model ``dynamics="fignet"`` loads without ``checkpoint`` (none: a user's
+    #: scene needs a model trained on it).
+    _default_checkpoint = ""
+
+    def _scene_config(self) -> SceneConfig:
+        """The scene as the generator reads it: the MJCF file, its assets embedded."""
+        from fignet_gym.data.scene_generator import SceneConfig
+
+        path, obj = self._scene_args[:2]
+        return SceneConfig.from_file(path, target=obj)  # one-line errors for a file MuJoCo refuses
 
 
 class ScenePushVectorEnv(SingleEnvVectorEnv):

@@ -189,7 +189,7 @@ class PushTask(Task):
             "reward_action": -self.action_weight * np.sum(act**2, axis=-1),
         }
         if self.success_weight:
-            success = self.success_of(pos, yaw)
+            success = self.is_success(states, goal)
             terms["reward_success"] = self.success_weight * success.astype(np.float64)
         return terms
 
@@ -203,6 +203,12 @@ class PushTask(Task):
     def is_success(self, states: np.ndarray, goal: np.ndarray) -> np.ndarray:
         """``bool[...]``: both errors within tolerance (termination)."""
         return self.success_of(*self.errors(states, goal))
+
+    def measures(self, states: np.ndarray, goal: np.ndarray) -> dict[str, np.ndarray]:
+        """What the env reports in ``info`` besides the reward terms: ``position_error`` (m) and
+        ``orientation_error`` (rad) to ``goal float[..., 3]``, each ``float[...]``."""
+        pos, yaw = self.errors(states, goal)
+        return {"position_error": pos, "orientation_error": yaw}
 
     def success_of(self, pos: np.ndarray, yaw: np.ndarray) -> np.ndarray:
         """``bool[...]`` of the errors ``float[...]`` of :meth:`errors`: both within tolerance."""

@@ -40,6 +40,12 @@ ENV_SPECS: dict[str, tuple[str, str, int | None, dict[str, Any]]] = {
         "fignet_gym.envs.scene_push:ScenePushEnv", "fignet_gym.envs.scene_push:ScenePushVectorEnv",
         75, PUSH_V1_KWARGS,
     ),
+    # Push-T (a T block, scored by coverage of the goal): Push-v2's task and its isotropic
+    # physics, success at 90% coverage (gym-pusht's 95% is success_coverage=0.95).
+    "fignet_gym/PushT-v0": (
+        "fignet_gym.envs.pusht:PushTEnv", "fignet_gym.envs.pusht:PushTVectorEnv", 100,
+        {**PUSH_V1_KWARGS, "success_coverage": 0.9},
+    ),
     "fignet_gym/Toss-v0": (
         "fignet_gym.envs.toss:TossEnv", "fignet_gym.envs.toss:TossVectorEnv", None,
         {"cone": "pyramidal"},
