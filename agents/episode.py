@@ -64,6 +64,8 @@ def run_episode(
         out["is_success"] = bool(info.get("is_success", False))
         out["position_error"] = float(info["position_error"])
         out["orientation_error"] = float(info["orientation_error"])
+    if "coverage" in info:  # PushT: the fraction of the goal covered
+        out["coverage"] = float(info["coverage"])
     if "num_in_target" in info:
         out["num_in_target"] = int(info["num_in_target"])
     if "distance" in info and "yaw_error_deg" in info:  # CubeToss: the landing error

@@ -22,6 +22,7 @@ from fignet_gym.envs.tasks import PushTask
 from fignet_gym.envs.vector import SingleEnvVectorEnv
 from fignet_gym.mjcf.pusht import pusht_rectangles, pusht_scene_xml
 
+
 def _polygon_area(poly: np.ndarray) -> np.ndarray:
     """``float[..., M, 2] -> float[...]`` signed shoelace area (repeated vertices add nothing)."""
     x, y = poly[..., 0], poly[..., 1]
@@ -122,7 +123,7 @@ class PushTEnv(ScenePushEnv):
     pose terms of the reward are :class:`~fignet_gym.envs.push.PushEnv`'s; ``env.task`` is a
     :class:`PushTTask`. ``info`` adds ``coverage`` and ``reward_coverage``.
 
-    ## Arguments (beyond ``PushEnv``'s, which ``PushT-v0`` sets as listed in ``docs/envs.md``)
+    ## Arguments (beyond ``PushEnv``'s; ``PushT-v0`` registers Push-v2's task arguments)
 
     | argument | default | meaning |
     |---|---|---|

@@ -17,13 +17,10 @@ import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.envs import CubeTossEnv, PushEnv, TossEnv
 from fignet_gym.simulator.checkpoint import save
 
-ENV_IDS = ["fignet_gym/Push-v2", "fignet_gym/Push-v1", "fignet_gym/Toss-v0"]
+ENV_IDS = ["fignet_gym/Push-v2", "fignet_gym/Push-v1", "fignet_gym/PushT-v0", "fignet_gym/Toss-v0"]
 #: Keep learned Toss steps cheap in tests: 3 learned steps per toss instead of 50.
-FAST = {"fignet_gym/Push-v2": {}, "fignet_gym/Push-v1": {}, "fignet_gym/Toss-v0": {"settle_steps": 3}}
-
-
-
-
+FAST = {"fignet_gym/Push-v2": {}, "fignet_gym/Push-v1": {}, "fignet_gym/PushT-v0": {},
+        "fignet_gym/Toss-v0": {"settle_steps": 3}}
 
 
 def make_kwargs(env_id: str, dynamics: str) -> dict[str, Any]:

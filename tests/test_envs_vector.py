@@ -14,7 +14,7 @@ import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.envs import BatchedVectorEnv, SB3VecEnvAdapter, make_sb3_vec_env
 from fignet_gym.simulator.model import LearnedSimulator
 
-ENV_IDS = ["fignet_gym/Push-v2", "fignet_gym/Push-v1", "fignet_gym/Toss-v0"]
+ENV_IDS = ["fignet_gym/Push-v2", "fignet_gym/Push-v1", "fignet_gym/PushT-v0", "fignet_gym/Toss-v0"]
 FAST = {"fignet_gym/Push-v2": {}, "fignet_gym/Push-v1": {}, "fignet_gym/Toss-v0": {"settle_steps": 3}}
 
 

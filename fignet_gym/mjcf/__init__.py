@@ -1,8 +1,8 @@
 """MJCF builders for the push and toss scenes (MIT Pushing objects, MOVi-like tossed shapes).
 
-One module per scene type (:mod:`~fignet_gym.mjcf.push`, :mod:`~fignet_gym.mjcf.toss`,
-:mod:`~fignet_gym.mjcf.cube`) over shared pieces (:mod:`~fignet_gym.mjcf.assets`); the public
-names are re-exported here, where users import them.
+One module per scene type (:mod:`~fignet_gym.mjcf.push`, :mod:`~fignet_gym.mjcf.pusht`,
+:mod:`~fignet_gym.mjcf.toss`, :mod:`~fignet_gym.mjcf.cube`) over shared pieces
+(:mod:`~fignet_gym.mjcf.assets`); the public names are re-exported here, where users import them.
 
 Every builder returns an XML string for ``mujoco.MjModel.from_xml_string``. The world body holds
 a finite floor plane (object 0 of :meth:`fignet_gym.simulator.scene.Scene.from_mjmodel`); then come the
@@ -45,6 +45,7 @@ from fignet_gym.mjcf.push import (
     push_scene_text,
     push_scene_xml,
 )
+from fignet_gym.mjcf.pusht import pusht_outline, pusht_rectangles, pusht_scene_xml
 from fignet_gym.mjcf.toss import (
     COMPLEX_SHAPES,
     FLOOR_FRICTION,
@@ -64,6 +65,7 @@ __all__ = [
     "MATERIALS", "MIT_OBJECTS", "MIT_THICKNESS", "ROLLING_FRICTION", "SIMPLE_SHAPES", "TORSIONAL_FRICTION",
     "TOSS_SHAPES", "MeshOptions",
     "PushObject", "TossObject", "cube_scene_xml", "ellipse_outline", "prism_mesh", "push_object",
-    "push_scene_text", "push_scene_xml", "restitution_to_dampratio", "toss_scene_xml", "unit_shape_mesh",
+    "push_scene_text", "push_scene_xml", "pusht_outline", "pusht_rectangles", "pusht_scene_xml",
+    "restitution_to_dampratio", "toss_scene_xml", "unit_shape_mesh",
     "yaw_quat",
 ]

@@ -209,6 +209,8 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
     if rows and "position_error" in rows[0]:
         out["median_position_error"] = float(np.median([r["position_error"] for r in rows]))
         out["median_orientation_error"] = float(np.median([r["orientation_error"] for r in rows]))
+    if rows and "coverage" in rows[0]:
+        out["median_coverage"] = float(np.median([r["coverage"] for r in rows]))
     if rows and "num_in_target" in rows[0]:
         out["mean_in_target"] = float(np.mean([r["num_in_target"] for r in rows]))
     if rows:
@@ -225,13 +227,14 @@ def print_table(label: str, rows: list[dict[str, Any]], summary: dict[str, Any])
     """Per-episode rows, then the summary line."""
     push = "position_error" in (rows[0] if rows else {})
     cube = "distance" in (rows[0] if rows else {})
-    head = ("success  pos. err (mm)  heading err (rad)" if push else
+    cover = "coverage" in (rows[0] if rows else {})
+    head = ("success  pos. err (mm)  heading err (rad)" + ("  coverage" if cover else "") if push else
             "success  landing err (mm)  yaw err (deg)" if cube else "in target")
     print(f"\n{label}\n{'seed':>6s}  {'steps':>5s}  {head}  {'s/action (cpu)':>14s}")
     for r in rows:
         if push:
             body = (f"{str(r['is_success']):>7s}  {r['position_error'] * 1000:13.1f}  "
-                    f"{r['orientation_error']:17.3f}")
+                    f"{r['orientation_error']:17.3f}" + (f"  {r['coverage']:8.3f}" if cover else ""))
         elif cube:
             body = (f"{str(r['is_success']):>7s}  {r['distance'] * 1000:17.1f}  "
                     f"{r['yaw_error_deg']:13.1f}")
@@ -244,7 +247,8 @@ def print_table(label: str, rows: list[dict[str, Any]], summary: dict[str, Any])
     if push:
         print(f"success {summary['success_rate']:.0%} of {summary['episodes']}, median errors "
               f"{summary['median_position_error'] * 1000:.1f} mm / "
-              f"{summary['median_orientation_error']:.3f} rad, "
+              f"{summary['median_orientation_error']:.3f} rad"
+              + (f", median coverage {summary['median_coverage']:.3f}" if cover else "") + ", "
               f"{spa.get('cpu', 0):.3f} CPU-s ({spa.get('wall', 0):.3f} s wall) per action")
     elif cube:
         print(f"success {summary['success_rate']:.0%} of {summary['episodes']}, landing error "
