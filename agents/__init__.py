@@ -77,7 +77,7 @@ _PPO_NAMES = ("EVAL_KEYS", "NormalizedPolicy", "PPOConfig", "RunConfig", "availa
 
 def __getattr__(name: str) -> object:
     if name in _PPO_NAMES:
-        # Deferred: the PPO stack (stable-baselines3, TensorBoard) only for those who use it.
+        # deferred: the PPO stack (stable-baselines3, TensorBoard) only for those who use it (PEP 562)
         import fignet_gym.agents.ppo as ppo
 
         return getattr(ppo, name)

@@ -48,8 +48,8 @@ _SB3_NAMES = ("SB3VecEnvAdapter", "make_sb3_vec_env")
 
 
 def __getattr__(name: str) -> Any:
-    # stable-baselines3 costs seconds to import: only users of its adapter pay for it.
     if name in _SB3_NAMES:
+        # deferred: stable-baselines3 costs seconds to import; only its adapter's users pay (PEP 562)
         from fignet_gym.envs import sb3
 
         return getattr(sb3, name)

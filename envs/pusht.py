@@ -164,6 +164,7 @@ class PushTEnv(ScenePushEnv):
         return dict(self._coverage_args)
 
     def _scene_config(self) -> Any:
+        # deferred: the data layer (h5py, trimesh) loads only when a scene env is made
         from fignet_gym.data.scene_generator import SceneConfig
 
         return SceneConfig(mjcf=pusht_scene_xml(), target="object", source="PushT-v0")

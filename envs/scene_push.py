@@ -66,7 +66,7 @@ def _geom_points(model: mujoco.MjModel, g: int) -> np.ndarray:
 def object_outline(model: mujoco.MjModel, body: str) -> np.ndarray:
     """``float[K, 2]`` counter-clockwise convex outline (m) of ``body``'s geoms seen from above,
     in the body frame: the hull of MuJoCo's own geometry."""
-    from scipy.spatial import ConvexHull
+    from scipy.spatial import ConvexHull  # deferred: scipy loads only for a user's scene
 
     b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body)
     geoms = np.flatnonzero(model.geom_bodyid == b)
@@ -109,7 +109,7 @@ class ScenePushEnv(PushEnv):
 
     def _push_scene(self, shape: str, friction: float, tip_friction: float | None,
                     cone: str) -> PushScene:
-        # Imported here: the data layer (h5py, trimesh) loads only for a user's scene.
+        # deferred: the data layer (h5py, trimesh) loads only for a user's scene
         from fignet_gym.data.scene_generator import check_scene
 
         path, obj, pusher, tip_bound, camera = self._scene_args
@@ -140,7 +140,7 @@ class ScenePushEnv(PushEnv):
 
     def _scene_config(self) -> SceneConfig:
         """The scene as the generator reads it: the MJCF file, its assets embedded."""
-        from fignet_gym.data.scene_generator import SceneConfig
+        from fignet_gym.data.scene_generator import SceneConfig  # deferred: as in _push_scene
 
         path, obj = self._scene_args[:2]
         return SceneConfig.from_file(path, target=obj)  # one-line errors for a file MuJoCo refuses

@@ -7,9 +7,23 @@ import argparse
 import json
 import os
 import sys
+import warnings
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
+# The commands that load the trainer (TensorBoard), Gymnasium's envs or stable-baselines3 import
+# their module when they run (`# deferred:` below), so `fignet-gym --help` stays fast.
+from fignet_gym.atomic import output_lock
 from fignet_gym.data.cli import int_at_least, nonnegative_float
+from fignet_gym.data.cli import register as register_data
+from fignet_gym.data.generate import GenerationError
+from fignet_gym.dynamics.mujoco import collect_warnings
+from fignet_gym.tools import bench, bench_collision, collect, plan
+from fignet_gym.train.evaluation import evaluate
+from fignet_gym.train.floor import floor_table
+from fignet_gym.train.ship import ship
+from fignet_gym.train.sim2real import PRIORS, parse_sizes, run_sim2real
+from fignet_gym.train.sim2real_report import compare_runs
 
 
 # ----------------------------------------------------------------------------- user errors
@@ -20,8 +34,6 @@ def user_error(err: BaseException) -> str | None:
     unreadable paths), refused overwrites, unsupported scenes, and ``ValueError`` from argument
     and config checks. Their messages already name the file and field.
     """
-    from fignet_gym.data.generate import GenerationError
-
     # CheckpointError, TrajectoryFormatError, RunFolderError and UnsupportedSceneError are
     # ValueErrors.
     if isinstance(err, OSError) and not isinstance(err, (FileExistsError, FileNotFoundError)):
@@ -37,11 +49,6 @@ def run_command(func: Callable[[argparse.Namespace], int | None], args: argparse
     ``FIGNET_GYM_TRACEBACK=1`` for the traceback); anything else (a bug) propagates. MuJoCo's
     warnings are counted into one line at the end (stages that expect them, such as the contact
     fit, summarise their own), never printed one by one nor written to ``MUJOCO_LOG.TXT``."""
-    # Deferred like every command's own imports: --help stays fast.
-    import warnings
-
-    from fignet_gym.dynamics.mujoco import collect_warnings
-
     default_show = warnings.showwarning
 
     def one_line(message: Warning | str, category: type[Warning], *rest: object, **kw: object) -> None:
@@ -85,7 +92,7 @@ def _overrides(text: str | None) -> dict:
 
 # ----------------------------------------------------------------------------- commands
 def _train(args: argparse.Namespace) -> int:
-    from fignet_gym.train.trainer import train_from_files
+    from fignet_gym.train.trainer import train_from_files  # deferred: TensorBoard; `--help` stays fast
 
     overrides = _overrides(args.set)
     train_from_files(args.data, args.valid, args.config, args.out, resume=args.resume,
@@ -95,32 +102,23 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from fignet_gym.train.evaluation import evaluate
-
     evaluate(args.checkpoint, args.data, args.out, num=args.num, horizon=args.horizon,
              videos=args.videos, against=args.against)
     return 0
 
 
 def _floor(args: argparse.Namespace) -> int:
-    from fignet_gym.train.floor import floor_table
-
     floor_table(args.data, args.noise, out=args.out, num=args.num, horizon=args.horizon,
                 history=args.history)
     return 0
 
 
 def _ship(args: argparse.Namespace) -> int:
-    from fignet_gym.train.ship import ship
-
     ship(args.run, args.name, args.data, args.horizon, num=args.num, dest=args.dest, notes=args.notes)
     return 0
 
 
 def _sim2real(args: argparse.Namespace) -> int:
-    from fignet_gym.atomic import output_lock
-    from fignet_gym.train.sim2real import parse_sizes, run_sim2real
-
     sizes, overrides = parse_sizes(args.sizes), _overrides(args.set) or None
     with output_lock(args.out):  # one process per run folder
         run_sim2real(args.data, args.out, sizes, fractions=args.fractions,
@@ -134,10 +132,6 @@ def _sim2real(args: argparse.Namespace) -> int:
 
 
 def _sim2real_compare(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from fignet_gym.train.sim2real_report import compare_runs
-
     labels = args.labels or [Path(r).name for r in args.runs]
     if len(labels) != len(args.runs):
         raise ValueError(f"--labels: {len(labels)} labels for {len(args.runs)} runs")
@@ -153,18 +147,16 @@ def _sim2real_compare(args: argparse.Namespace) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from fignet_gym.tools.bench import run
-
-    run(args)
+    bench.run(args)
     return 0
 
 
 def _bench_tool(args: argparse.Namespace) -> int:
     """``bench-envs`` / ``bench-collision``: the tool's own options (``--help`` lists them)."""
     if args.tool == "bench-envs":
-        from fignet_gym.tools.bench_envs import main as tool
+        from fignet_gym.tools.bench_envs import main as tool  # deferred: Gymnasium; `--help` stays fast
     else:
-        from fignet_gym.tools.bench_collision import main as tool
+        tool = bench_collision.main
     try:
         tool(args.rest)
     except SystemExit as exc:  # argparse's own exit (--help: 0, a bad option: 2)
@@ -184,49 +176,40 @@ def _one_line_errors(run: Callable[[argparse.Namespace], object], user_error: ty
 
 
 def _plan(args: argparse.Namespace) -> int:
-    from fignet_gym.tools.plan import PlanError, run
-
-    return _one_line_errors(run, PlanError, args)
+    return _one_line_errors(plan.run, plan.PlanError, args)
 
 
 def _collect(args: argparse.Namespace) -> int:
-    from fignet_gym.tools.collect import CollectError, collect
-
-    return _one_line_errors(collect, CollectError, args)
+    return _one_line_errors(collect.collect, collect.CollectError, args)
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from fignet_gym.tools.demo import run_demo
+    from fignet_gym.tools.demo import run_demo  # deferred: stable-baselines3; `--help` stays fast
 
     run_demo(args.out, quick=args.quick, episodes=args.episodes, rollouts=args.rollouts)
     return 0
 
 
 def _ppo(args: argparse.Namespace) -> int:
-    from fignet_gym.tools.ppo import run_ppo_command
+    from fignet_gym.tools.ppo import run_ppo_command  # deferred: stable-baselines3; `--help` stays fast
 
     return run_ppo_command(args)
 
 
 def _ppo_table(args: argparse.Namespace) -> int:
-    from fignet_gym.tools.ppo import ppo_table_command
+    from fignet_gym.tools.ppo import ppo_table_command  # deferred: stable-baselines3; `--help` stays fast
 
     return ppo_table_command(args)
 
 
 def _ppo_ship(args: argparse.Namespace) -> int:
-    from fignet_gym.tools.ppo_ship import ppo_ship_command
+    from fignet_gym.tools.ppo_ship import ppo_ship_command  # deferred: stable-baselines3; `--help` stays fast
 
     return ppo_ship_command(args)
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The full ``fignet-gym`` argument parser."""
-    from fignet_gym.data.cli import register as register_data
-    from fignet_gym.tools.bench import add_arguments as bench_args
-    from fignet_gym.tools.collect import add_arguments as collect_args
-    from fignet_gym.tools.plan import add_arguments as plan_args
-
     p = argparse.ArgumentParser(prog="fignet-gym", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
 
@@ -241,15 +224,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     pl = sub.add_parser("plan", help="MPC (CEM, MPPI) or a baseline on seeded episodes: "
                         "success table, summary.json, side-by-side videos")
-    plan_args(pl)
+    plan.add_arguments(pl)
     pl.set_defaults(func=_plan)
     co = sub.add_parser("collect", help="record a planner's episodes, acted in MuJoCo, as "
                         "training trajectories (on-policy data)")
-    collect_args(co)
+    collect.add_arguments(co)
     co.set_defaults(func=_collect)
 
     b = sub.add_parser("bench", help="learned step vs MuJoCo timings")
-    bench_args(b)
+    bench.add_arguments(b)
     b.set_defaults(func=_bench)
 
     for name, what in (("bench-envs", "env steps per second of the envs, single and vectorised"),
@@ -411,8 +394,6 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--pretrain", type=int_at_least(0), default=0, metavar="N",
                    help="pretrain FIGNet on N synthetic tosses or pushes from the model(s) fitted "
                         "on the smallest size's trajectories, then fine-tune each size (0: none)")
-    from fignet_gym.train.sim2real import PRIORS
-
     r.add_argument("--prior", choices=PRIORS, default="mujoco",
                    help="--pretrain on pushes: the fitted model(s) the synthetic pushes come from "
                         "(both: half each); pretraining starts from --init (default: %(default)s)")

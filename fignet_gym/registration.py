@@ -73,6 +73,7 @@ ENV_IDS: dict[str, int | None] = {k: v[2] for k, v in ENV_SPECS.items()}
 
 def register_envs() -> None:
     """Register every id of :data:`ENV_SPECS` with Gymnasium (idempotent)."""
+    # deferred: called once Gymnasium is imported; `import fignet_gym` must not load it (module doc)
     import gymnasium as gym
 
     for env_id, (entry, vector_entry, limit, kwargs) in ENV_SPECS.items():

@@ -3,6 +3,10 @@ the fixed goal."""
 
 from __future__ import annotations
 
+import importlib.util
+from pathlib import Path
+from typing import Any
+
 import gymnasium as gym
 import mujoco
 import numpy as np
@@ -173,3 +177,30 @@ def test_the_registered_env_runs_and_learned_dynamics_need_no_checkpoint_argumen
     _, _, _, _, info = env.step(env.action_space.sample())
     assert 0.0 <= info["coverage"] <= 1.0
     assert env.spec.max_episode_steps == 100
+
+
+def _generalisation() -> Any:
+    spec = importlib.util.spec_from_file_location(
+        "pusht_generalisation", Path(__file__).resolve().parents[1] / "scripts" / "pusht_generalisation.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_unseen_shapes_are_centred_prisms_of_their_pieces_area() -> None:
+    g = _generalisation()
+    for name, pieces in g.SHAPES.items():
+        model = mujoco.MjModel.from_xml_string(g.shape_xml(name))
+        b = model.body("object").id
+        area = sum(_area(p) for p in pieces)
+        assert model.body_mass[b] == pytest.approx(PUSHT_DENSITY * area * g.THICKNESS, rel=1e-5)
+        np.testing.assert_allclose(model.body_ipos[b], 0.0, atol=1e-6)  # frame at the centroid
+
+
+def test_the_generalisation_driver_writes_its_table_at_a_tiny_budget(tmp_path: Path) -> None:
+    table = _generalisation().main(["--out", str(tmp_path), "--num", "2", "--test", "2",
+                                    "--steps", "2", "--pusht", "push"])
+    assert set(table) == {"L", "triangle", "big box", "pebble"}
+    for row in table.values():
+        assert len(row) == 3 and np.isfinite(np.array(list(row.values()))).all()
+    assert (tmp_path / "table.md").read_text().count("\n") == 2 + len(table)

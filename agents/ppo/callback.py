@@ -11,6 +11,7 @@ import numpy as np
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecNormalize
+from tqdm import tqdm
 
 from fignet_gym.agents.ppo.config import RunConfig
 from fignet_gym.agents.ppo.curriculum import find_curriculum
@@ -71,8 +72,6 @@ class RunCallback(BaseCallback):
         self.cpu_before, self.wall_before = cpu_before, wall_before
 
     def _on_training_start(self) -> None:
-        from tqdm import tqdm
-
         t = self.model.num_timesteps
         every = self.cfg.eval_every
         self.next_eval = (t // every + 1) * every if every else None

@@ -23,6 +23,7 @@ from stable_baselines3.common.logger import (
     TensorBoardOutputFormat,
     filter_excluded_keys,
 )
+from torch.utils.tensorboard import SummaryWriter
 
 from fignet_gym.atomic import write_text
 
@@ -73,8 +74,6 @@ class _TensorBoard(TensorBoardOutputFormat):
     """SB3's TensorBoard output whose writer hides earlier events from ``purge_step`` on."""
 
     def __init__(self, folder: Path, purge_step: int | None) -> None:
-        from torch.utils.tensorboard import SummaryWriter
-
         # Events at steps after a checkpoint were written by a killed process and are redone
         # from it: SummaryWriter(purge_step=...) tells TensorBoard to drop them.
         self.writer = SummaryWriter(str(folder), purge_step=purge_step)

@@ -8,6 +8,7 @@ import pickle
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecNormalize
@@ -92,8 +93,6 @@ def run_transform(env_id: str, env_kwargs: dict[str, Any], kind: str) -> Observa
     read from a MuJoCo instance of the env (its task's outline and tip)."""
     if kind == "env":
         return None
-    import gymnasium as gym
-
     env = gym.make(env_id, **{**env_kwargs, "dynamics": "mujoco"})
     try:
         return ObservationTransform.of_env(kind, env.unwrapped)

@@ -31,6 +31,7 @@ from gymnasium.envs.registration import load_env_creator
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
+import fignet_gym.envs  # noqa: F401  (registers the environments)
 from fignet_gym.agents.ppo.callback import RunCallback, Stop
 from fignet_gym.agents.ppo.config import RunConfig
 from fignet_gym.agents.ppo.curriculum import GoalCurriculum, find_curriculum
@@ -86,8 +87,6 @@ def torch_threads(n: int | None) -> Iterator[None]:
 
 def check_env_id(env_id: str) -> None:
     """``RunError`` unless ``env_id`` is a registered fignet_gym env (a batched vector entry point)."""
-    import fignet_gym.envs  # noqa: F401  (registers the environments)
-
     ours = sorted(k for k in gym.registry if k.startswith("fignet_gym/"))
     if env_id not in gym.registry:
         raise RunError(f"--env {env_id!r} is not registered (fignet_gym ids: {', '.join(ours)})")

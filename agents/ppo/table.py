@@ -213,11 +213,12 @@ def plot_curves(runs: Sequence[str | os.PathLike], path: str | os.PathLike) -> P
     """
     curves = [read_curves(run) for run in runs]
 
+    # deferred: Matplotlib loads, and its Agg backend is chosen, when a plot is drawn, not to read tables
     import matplotlib
-    import matplotlib.ticker
+    import matplotlib.ticker  # deferred: as matplotlib above
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # deferred: after the backend is chosen
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 3.8))
     for i, (trained, x, values) in enumerate(curves):

@@ -11,15 +11,35 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import math
 import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 from fignet_gym.atomic import output_lock, write_text
-from fignet_gym.data.format import TrajectoryFormatError
+from fignet_gym.data.format import TrajectoryFile, TrajectoryFormatError
+from fignet_gym.data.generate import KINDS, TossConfig, default_config, generate
+from fignet_gym.data.importers import import_movi, load_mesh_map
+from fignet_gym.data.mit import (
+    MitProtocol,
+    MitReport,
+    MitSelection,
+    check_mit,
+    import_mit,
+    offsets_from_report,
+)
+from fignet_gym.data.mit_files import MODEL_DT
+from fignet_gym.data.mit_geometry import INSIDE_TOLERANCE
+from fignet_gym.data.scene_generator import SceneConfig
+from fignet_gym.data.split import write_split
+from fignet_gym.data.standin import write_mit_standin
+from fignet_gym.data.tracked import import_contactnets
+from fignet_gym.data.viewer import Camera, render_trajectory_record
 from fignet_gym.mjcf.assets import CONES, DEFAULT_CONE
+from fignet_gym.simulator.scene import MeshOptions
 
 
 def int_at_least(low: int) -> Callable[[str], int]:
@@ -99,11 +119,6 @@ def _refuse_empty(n: int, out: str | os.PathLike) -> None:
 
 
 def _generate(args: argparse.Namespace) -> int:
-    from dataclasses import replace
-
-    from fignet_gym.data.generate import TossConfig, default_config, generate
-    from fignet_gym.simulator.scene import MeshOptions
-
     if args.kind == "scene":
         return _generate_scene(args)
     if args.mjcf is not None:
@@ -128,9 +143,6 @@ def _generate(args: argparse.Namespace) -> int:
 
 
 def _generate_scene(args: argparse.Namespace) -> int:
-    from fignet_gym.data.generate import generate
-    from fignet_gym.data.scene_generator import SceneConfig
-
     if args.mjcf is None:
         raise ValueError("generate scene: pass the scene's MJCF (--mjcf FILE)")
     if args.cone is not None:
@@ -152,9 +164,6 @@ def _generate_scene(args: argparse.Namespace) -> int:
 
 
 def _show(args: argparse.Namespace) -> int:
-    from fignet_gym.data.format import TrajectoryFile
-    from fignet_gym.data.viewer import Camera, render_trajectory_record
-
     with TrajectoryFile(args.file) as f:
         traj = f[args.traj]
     out = args.out or Path(args.file).with_name(f"{Path(args.file).stem}_traj{args.traj}.mp4")
@@ -165,9 +174,7 @@ def _show(args: argparse.Namespace) -> int:
     return 0
 
 
-def _mit_selection(args: argparse.Namespace):  # -> fignet_gym.data.mit.MitSelection
-    from fignet_gym.data.mit import MitSelection
-
+def _mit_selection(args: argparse.Namespace) -> MitSelection:
     return MitSelection(
         surfaces=None if "any" in args.surface else tuple(args.surface),
         shapes=tuple(args.shape) if args.shape else None,
@@ -175,9 +182,7 @@ def _mit_selection(args: argparse.Namespace):  # -> fignet_gym.data.mit.MitSelec
         accelerations=None if args.any_acceleration else tuple(args.acceleration))
 
 
-def _mit_protocol(args: argparse.Namespace):  # -> fignet_gym.data.mit.MitProtocol
-    from fignet_gym.data.mit import MitProtocol, offsets_from_report
-
+def _mit_protocol(args: argparse.Namespace) -> MitProtocol:
     if args.outlines is not None and not Path(args.outlines).is_dir():
         raise FileNotFoundError(f"--outlines {args.outlines}: no such folder (it holds "
                                 "<shape>_ext.npy outlines)")
@@ -193,9 +198,7 @@ def _mit_protocol(args: argparse.Namespace):  # -> fignet_gym.data.mit.MitProtoc
                        offsets=offsets_from_report(args.offsets) if args.offsets else None)
 
 
-def _write_report(report, path: str | None) -> None:  # report: fignet_gym.data.mit.MitReport
-    import json
-
+def _write_report(report: MitReport, path: str | None) -> None:
     print(report.table())
     for c in report.shapes.values():
         for name in c.still:
@@ -206,8 +209,6 @@ def _write_report(report, path: str | None) -> None:  # report: fignet_gym.data.
 
 
 def _import_mit(args: argparse.Namespace) -> int:
-    from fignet_gym.data.mit import import_mit
-
     protocol = _mit_protocol(args)
     with _writing(args.out, args.force):
         report = import_mit(args.paths, args.out, _mit_selection(args), protocol,
@@ -225,9 +226,6 @@ def _import_mit(args: argparse.Namespace) -> int:
 
 
 def _check_mit(args: argparse.Namespace) -> int:
-    from fignet_gym.data.mit import check_mit
-    from fignet_gym.data.mit_geometry import INSIDE_TOLERANCE
-
     report = check_mit(args.paths, _mit_selection(args), _mit_protocol(args),
                        skip_bad=args.skip_bad)
     if not report.shapes:
@@ -242,8 +240,6 @@ def _check_mit(args: argparse.Namespace) -> int:
 
 
 def _import_movi(args: argparse.Namespace) -> int:
-    from fignet_gym.data.importers import import_movi, load_mesh_map
-
     with _writing(args.out, args.force):
         n = import_movi(args.paths, load_mesh_map(args.meshes), args.out, skip_bad=args.skip_bad,
                         frame_rate=args.frame_rate, floor_half_size=args.floor_half_size)
@@ -253,8 +249,6 @@ def _import_movi(args: argparse.Namespace) -> int:
 
 
 def _import_contactnets(args: argparse.Namespace) -> int:
-    from fignet_gym.data.tracked import import_contactnets
-
     with _writing(args.out, args.force):
         n = import_contactnets(args.directory, args.out, length_unit=args.length_unit,
                                floor_half_size=args.floor_half_size, skip_bad=args.skip_bad)
@@ -263,8 +257,6 @@ def _import_contactnets(args: argparse.Namespace) -> int:
 
 
 def _split(args: argparse.Namespace) -> int:
-    from fignet_gym.data.split import write_split
-
     with output_lock(args.out):
         paths = write_split(args.data, args.out, args.fractions, args.seed, force=args.force)
     print(f"wrote {', '.join(str(p) for p in paths.values())}")
@@ -272,8 +264,6 @@ def _split(args: argparse.Namespace) -> int:
 
 
 def _mit_standin(args: argparse.Namespace) -> int:
-    from fignet_gym.data.standin import write_mit_standin
-
     with output_lock(args.out):
         files = write_mit_standin(args.out, args.num, args.seed, penetration=args.penetration,
                                   position_noise=args.noise, force=args.force)
@@ -298,9 +288,6 @@ def _mit_selection_args(p: argparse.ArgumentParser) -> None:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the data subcommands to ``subparsers`` (of the ``fignet-gym`` parser)."""
-    from fignet_gym.data.generate import KINDS
-
-
     g = subparsers.add_parser("generate", help="generate MuJoCo training trajectories",
                               description="Generate trajectories with MuJoCo into an HDF5 file.")
     g.add_argument("kind", choices=KINDS)
@@ -365,8 +352,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     m.add_argument("paths", nargs="+", help="files or directories (searched recursively)")
     m.add_argument("--out", required=True)
     _mit_selection_args(m)
-    from fignet_gym.data.mit_files import MODEL_DT
-
     m.add_argument("--dt", type=positive_float, default=MODEL_DT,
                    help=f"pose step (s; default {MODEL_DT:g}: the shipped push models' step; 0.012 "
                    "is the FIGNet paper's, every 3rd sample of the 250 Hz streams)")

@@ -27,13 +27,14 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
 import h5py
+import mujoco
 import numpy as np
 
 from fignet_gym.simulator.scene import MeshOptions, ObjectKind, Scene
@@ -139,8 +140,6 @@ def build_scene(traj: Trajectory, mesh_options: MeshOptions | None = None) -> Sc
     simulators use, so stored props that contradict it are an error, not silently ignored).
     """
     if traj.mjcf is not None:
-        import mujoco
-
         where = _where(traj.source, traj.name, "mjcf")
         try:
             model = mujoco.MjModel.from_xml_string(traj.mjcf)
@@ -275,8 +274,6 @@ class TrajectoryWriter:
             raise RuntimeError(f"{self.path}: writer is closed")
         validate_trajectory(traj, self.path)
         if traj.mjcf is not None:  # objects, kinds and props against the MJCF, naming this file
-            from dataclasses import replace
-
             build_scene(replace(traj, source=str(self.path)))
         g = self._group.create_group(f"{self.count:06d}")
         g.attrs["name"] = traj.name or f"{self.count:06d}"

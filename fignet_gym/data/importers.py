@@ -20,6 +20,7 @@ from typing import Any
 
 import h5py
 import numpy as np
+import trimesh
 
 from fignet_gym.data.format import (
     ObjectMeshes,
@@ -83,8 +84,6 @@ MOVI_SIZES = {"small": 0.7, "large": 1.4}
 
 @lru_cache(maxsize=64)
 def _load_mesh(path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    import trimesh
-
     try:
         mesh = trimesh.load(path, force="mesh", process=True)
     except Exception as err:  # trimesh raises many types for bad files

@@ -32,6 +32,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+import mujoco
 import numpy as np
 
 from fignet_gym.data import mit_geometry as geo
@@ -281,8 +282,6 @@ def _planar_poses(obj: np.ndarray, tip: np.ndarray, thickness: float) -> np.ndar
 
 def _scene_info(mjcf: str) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """Kinds, properties and names of the scene (as the trajectory file checks them)."""
-    import mujoco
-
     scene = Scene.from_mjmodel(mujoco.MjModel.from_xml_string(mjcf))
     return scene.object_kind.numpy(), scene.object_props.double().numpy(), scene.object_names
 

@@ -23,6 +23,7 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import least_squares
 
 #: Radius (m) of the dataset's cylindrical steel tip.
 TIP_RADIUS = 0.00475
@@ -266,8 +267,6 @@ def _refine(pts: np.ndarray, w: np.ndarray, poly: np.ndarray, theta0: float,
     A fixed rotation is left out of the unknowns rather than boxed in: the bounded solver keeps
     every step strictly inside all bounds at once, so a rotation pinned to ``theta0 +- 1e-9`` near
     a bound (``theta0`` = 4e-16 after rounding) stopped the shift at its start."""
-    from scipy.optimize import least_squares
-
     sw = np.sqrt(w)  # each push's squared residuals weigh as one residual
     prior = RESIDUAL_SCALE / SHIFT_PRIOR  # a shift of SHIFT_PRIOR costs one push's worth
 

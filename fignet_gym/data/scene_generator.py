@@ -31,6 +31,7 @@ from typing import Any
 
 import mujoco
 import numpy as np
+import trimesh
 
 from fignet_gym.data.format import Trajectory
 from fignet_gym.data.generator_base import (
@@ -102,8 +103,6 @@ def _standalone_xml(model: mujoco.MjModel, path: Path) -> str:
     """The MJCF at ``path`` as one string: mesh files inlined (their vertices and faces as read
     from the file, so MuJoCo compiles them as before); texture files, which do not change the
     physics, dropped with the materials' references to them."""
-    import trimesh
-
     spec = mujoco.MjSpec.from_file(str(path))
     mesh_dir = path.parent / (spec.meshdir or "")
     for mesh in spec.meshes:

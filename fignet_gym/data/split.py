@@ -25,6 +25,9 @@ from typing import Any
 
 import numpy as np
 
+from fignet_gym.data.format import TrajectoryFile, TrajectoryWriter
+from fignet_gym.data.guards import check_single_scene_type
+
 #: Default fractions (train, validation, test).
 DEFAULT_FRACTIONS = (0.6, 0.2, 0.2)
 SPLITS = ("train", "valid", "test")
@@ -164,8 +167,6 @@ def file_split(data: str | os.PathLike, fractions: Sequence[float] = DEFAULT_FRA
                seed: int = 0, min_sizes: Sequence[int] = (1, 1, 1)) -> Split:
     """The split :func:`write_split` would write for the file ``data``, writing nothing
     (:class:`SplitError` naming the file if it has too few recordings)."""
-    from fignet_gym.data.format import TrajectoryFile
-
     with TrajectoryFile(data) as f:
         return split_indices(len(f), fractions, seed, min_sizes, where=str(data),
                              groups=trajectory_groups(f))
@@ -182,9 +183,6 @@ def write_split(data: str | os.PathLike, out: str | os.PathLike,
     ``FileExistsError`` if ``out`` already holds a split and ``force`` is not set. The files are
     written into a temporary sibling folder first, so a killed run leaves no partial split.
     """
-    from fignet_gym.data.format import TrajectoryFile, TrajectoryWriter
-    from fignet_gym.data.guards import check_single_scene_type
-
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise FileExistsError(f"--out {out}: is a file; --out must be a folder")

@@ -25,11 +25,15 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+import mujoco
 import numpy as np
+import torch
+from tqdm import tqdm
 
 from fignet_gym.data.format import Trajectory, TrajectoryFormatError
 from fignet_gym.data.guards import ImportWriter
 from fignet_gym.data.importers import IMPORTER_VERSION, DataImportError
+from fignet_gym.mjcf import cube_scene_xml
 from fignet_gym.simulator.scene import ObjectKind, Scene, UnsupportedSceneError
 
 #: Standard gravity (m/s^2): the ContactNets files give ``g`` in their length unit, so the unit is
@@ -48,8 +52,6 @@ def _src(source: str | os.PathLike | None) -> str:
 
 def compile_mjcf(mjcf: str, source: str | os.PathLike | None = None) -> Any:
     """``mujoco.MjModel`` of MJCF text; :class:`DataImportError` naming ``source`` if it fails."""
-    import mujoco
-
     try:
         return mujoco.MjModel.from_xml_string(mjcf)
     except ValueError as err:
@@ -234,8 +236,6 @@ def read_contactnets_params(path: str | os.PathLike) -> dict[str, Any]:
 
 def load_contactnets_toss(path: str | os.PathLike) -> np.ndarray:
     """One ``K.pt`` toss as ``float64[T, 19]`` (data units), checked."""
-    import torch
-
     path = Path(path)
     try:
         x = torch.load(path, weights_only=True, map_location="cpu")
@@ -263,8 +263,6 @@ def contactnets_scene(params: Mapping[str, Any], length_unit: float | None = Non
     come from ``experiment.json``; gravity is standard (the data's ``g`` is standard gravity in
     its unit); the default timestep is a quarter of the data's ``dt``.
     """
-    from fignet_gym.mjcf import cube_scene_xml
-
     unit = float(length_unit) if length_unit is not None else STANDARD_GRAVITY / float(params["g"])
     half = float(np.abs(np.asarray(params["vertices"], float)).max()) * unit
     xml = cube_scene_xml(half, float(params["mass"]), float(params["inertia"]) * unit**2,
@@ -322,8 +320,6 @@ def import_contactnets(directory: str | os.PathLike, out: str | os.PathLike,
     meta = {"source": "contactnets", "directory": str(directory), "length_unit_m": length_unit,
             "importer_version": IMPORTER_VERSION,
             "licence": "BSD-3-Clause, DAIRLab ContactNets (keep its LICENSE with derived files)"}
-    from tqdm import tqdm
-
     total = len(_contactnets_paths(directory)[1]) if directory.is_dir() else None
     with ImportWriter(out, meta) as writer:
         for traj in tqdm(read_contactnets(directory, length_unit, floor_half_size, skip_bad),

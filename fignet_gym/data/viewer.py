@@ -22,6 +22,7 @@ from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
+import imageio.v2 as imageio  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -45,12 +46,14 @@ class Camera:
 
 def _gl_context(width: int, height: int) -> Any:
     backend = os.environ.get("MUJOCO_GL", "").lower()
+    # deferred: only the backend MUJOCO_GL names is imported (each needs its own native GL
+    # library: EGL, OSMesa or GLFW with a display), and only when a frame is rendered
     if backend == "egl":
-        from mujoco.egl import GLContext
+        from mujoco.egl import GLContext  # deferred: see above
     elif backend == "osmesa":
-        from mujoco.osmesa import GLContext
+        from mujoco.osmesa import GLContext  # deferred: see above
     else:
-        from mujoco.glfw import GLContext
+        from mujoco.glfw import GLContext  # deferred: see above
     return GLContext(width, height)
 
 
@@ -161,8 +164,6 @@ def render_frames(model_or_mjcf: mujoco.MjModel | str, poses: np.ndarray,
 
 def write_video(frames: Sequence[np.ndarray], out_path: str | os.PathLike, fps: float) -> Path:
     """Write frames to ``.mp4`` (ffmpeg, H.264) or ``.gif``."""
-    import imageio.v2 as imageio
-
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
     suffix = out.suffix.lower()

@@ -8,6 +8,7 @@ from collections.abc import Iterator
 
 import mujoco
 import numpy as np
+from mujoco import rollout as mj_rollout
 
 from fignet_gym.dynamics.base import (
     CONTROL_SPEC,
@@ -107,8 +108,6 @@ class MujocoDynamics(DynamicsBase):
         B, T = control.shape[:2]
         if B == 0 or T == 0:  # mujoco.rollout crashes on an empty batch
             return np.zeros((B, T, state.shape[1]))
-        from mujoco import rollout as mj_rollout
-
         if self._pool is None:
             self._pool = mj_rollout.Rollout(nthread=self.nthread if self.nthread > 1 else 0)
         if self._scratch is None or self._scratch[0] is not model:

@@ -36,6 +36,7 @@ from fignet_gym.mjcf import TossObject, push_scene_xml, toss_scene_xml
 from fignet_gym.pretrained import load_pretrained
 from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
 from fignet_gym.simulator.scene import MeshOptions, Scene
+from fignet_gym.tools.bench_limits import matmul_rate, network_flops, time_rollouts
 
 
 @dataclass
@@ -217,8 +218,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def shipped_table(args: argparse.Namespace, dtype: torch.dtype, scenes: list[BenchScene]
                   ) -> list[dict[str, Any]]:
     """Per-scene cost of batched steps of the shipped models, with FLOPs and the matmul limit."""
-    from fignet_gym.tools.bench_limits import matmul_rate, network_flops
-
     rows = []
     print(f"\n== shipped models, steps batched as FIGNetDynamics does (chunks of <= {CHUNK_NODES} "
           "nodes); CPU ms per scene")
@@ -270,8 +269,6 @@ def shipped_table(args: argparse.Namespace, dtype: torch.dtype, scenes: list[Ben
 
 def rollout_table(args: argparse.Namespace, scenes: list[BenchScene]) -> dict[str, Any]:
     """Dynamics.rollout throughput of the shipped models against mujoco.rollout."""
-    from fignet_gym.tools.bench_limits import time_rollouts
-
     out: dict[str, Any] = {}
     for b in scenes:
         name = b.name.split()[0]
@@ -294,6 +291,7 @@ def run(args: argparse.Namespace) -> None:
     if args.threads:
         torch.set_num_threads(args.threads)
     if args.ppo:
+        # deferred: stable-baselines3 and TensorBoard; `fignet-gym --help` imports this module
         from fignet_gym.agents.ppo.bench import ppo_throughput_table
 
         table, rows = ppo_throughput_table(args.ppo_env, *args.ppo_setting, repeats=args.repeats)

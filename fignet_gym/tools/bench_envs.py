@@ -30,6 +30,11 @@ import mujoco
 import numpy as np
 import torch
 
+import fignet_gym.envs  # noqa: F401  (registers the environments)
+from fignet_gym.pretrained import available_pretrained, load_pretrained
+from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
+from fignet_gym.train.config import PRESETS
+
 ENV_IDS = {"push": "fignet_gym/Push-v2", "toss": "fignet_gym/Toss-v1"}
 
 
@@ -47,10 +52,6 @@ class Row:
 
 def learned_model(kind: str, checkpoint: str | None) -> tuple[Any, str]:
     """The simulator to benchmark for ``kind`` and a description of where it came from."""
-    from fignet_gym.pretrained import available_pretrained, load_pretrained
-    from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
-    from fignet_gym.train.config import PRESETS
-
     if checkpoint:
         return load_pretrained(checkpoint), f"checkpoint {checkpoint}"
     if kind in available_pretrained():
@@ -157,7 +158,6 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--json", help="also write the results here")
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
-    import fignet_gym.envs  # noqa: F401  (registers the environments)
 
     rows: list[Row] = []
     ratios: dict[str, dict[int, float]] = {}

@@ -25,7 +25,7 @@ from torch import nn
 
 from fignet_gym.dynamics import STATE_SPEC, FIGNetDynamics, MujocoDynamics
 from fignet_gym.simulator.model import LearnedSimulator
-from fignet_gym.simulator.networks import MIN_ROWS, MLP, EdgeIndex, EncodeProcessDecode
+from fignet_gym.simulator.networks import MIN_ROWS, MLP, EdgeIndex, EncodeProcessDecode, Topology
 from fignet_gym.simulator.scene import Scene
 
 Shape = tuple[int, int, int]  # (rows, in, out) of one matmul
@@ -62,8 +62,6 @@ def network_flops(sim: LearnedSimulator, scene: Scene, history: torch.Tensor
     blocks are ``encoders``, ``block 0`` .. ``block P-1`` and ``decoder``. Elementwise work
     (LayerNorm, ReLU, residual sums, gathers, scatters) is not counted.
     """
-    from fignet_gym.simulator.networks import Topology
-
     net: EncodeProcessDecode = sim.net
     inputs = sim.build_inputs(scene, history, history[-1])
     g = inputs.graph

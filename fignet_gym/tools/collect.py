@@ -29,10 +29,14 @@ from typing import Any
 
 import mujoco
 import numpy as np
+import torch
+from tqdm import tqdm
 
 from fignet_gym.atomic import output_lock
 from fignet_gym.data.cli import int_at_least
 from fignet_gym.data.format import Trajectory, TrajectoryWriter
+from fignet_gym.simulator.scene import Scene
+from fignet_gym.tools.plan import parse_env_kwargs, planning_agent, unknown_env
 
 #: ``metadata["source"]`` of recorded planner episodes (MuJoCo poses, not re-simulable by
 #: ``resimulate``: the tip follows the planner, not a generator's draw).
@@ -93,21 +97,20 @@ _FIXED_ENV_ARGS = ("dynamics", "checkpoint", "dynamics_kwargs", "render_mode", "
 def env_kwargs(text: str) -> dict[str, Any]:
     """``--env-kwargs``' JSON object as a dict; :class:`CollectError` if it is not one, or sets an
     argument the episodes fix (:data:`_FIXED_ENV_ARGS`)."""
-    from fignet_gym.tools.plan import parse_env_kwargs
-
     return parse_env_kwargs(text, _FIXED_ENV_ARGS, "collect acts in MuJoCo, unrendered",
                             CollectError)
 
 
 def _make_env(env_id: str, kwargs: dict[str, Any]) -> Any:
     """``gym.make(env_id, dynamics="mujoco", **kwargs)``; :class:`CollectError` for an argument
-    the env's constructor does not take or a value it refuses."""
+    the env's constructor does not take or a value it refuses (the ids are registered as soon as
+    Gymnasium is imported: :mod:`fignet_gym.registration`)."""
+    # deferred: Gymnasium; `fignet-gym --help` imports this module for its parser, not the RL stack
     import gymnasium as gym
-    from gymnasium.envs.registration import load_env_creator
 
     cls = gym.spec(env_id).entry_point
     if isinstance(cls, str):
-        cls = load_env_creator(cls)
+        cls = gym.envs.registration.load_env_creator(cls)
     params = inspect.signature(cls).parameters
     if not any(p.kind is p.VAR_KEYWORD for p in params.values()):
         unknown = sorted(set(kwargs) - set(params))
@@ -155,8 +158,6 @@ def record_episode(env: Any, planner: Any, seed: int, rng: np.random.Generator,
     ``t``; objects in ``Scene.from_mjmodel`` order. The summary holds the episode's length,
     return, success and final errors.
     """
-    from fignet_gym.simulator.scene import Scene
-
     u = env.unwrapped
     scene = Scene.from_mjmodel(u.model)
     env.reset(seed=seed)
@@ -184,13 +185,6 @@ def record_episode(env: Any, planner: Any, seed: int, rng: np.random.Generator,
 
 def collect(args: argparse.Namespace) -> dict[str, Any]:
     """Record ``args.episodes`` episodes into ``args.out`` (atomic); returns the run's summary."""
-    import torch
-    from tqdm import tqdm
-
-    import fignet_gym.envs  # noqa: F401  (registers the environments)
-    from fignet_gym.simulator.scene import Scene
-    from fignet_gym.tools.plan import planning_agent, unknown_env
-
     check_arguments(args)
     torch.set_num_threads(1)
     if unknown := unknown_env(args.env):

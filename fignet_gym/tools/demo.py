@@ -19,7 +19,20 @@ import time
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
+import imageio
 import numpy as np
+import torch
+
+import fignet_gym.envs  # noqa: F401  (registers the environments)
+from fignet_gym.agents import PolicyAgent, make_planner, run_episode
+from fignet_gym.agents.ppo import load_policy
+from fignet_gym.data.generate import iter_trajectories
+from fignet_gym.dynamics import DYNAMICS_LABELS, MujocoDynamics, make_dynamics
+from fignet_gym.pretrained import load_pretrained
+from fignet_gym.tools.plan import _label, summarize
+from fignet_gym.train.evaluation import rollout_metrics
+from fignet_gym.train.report import plot_curves, print_table, write_comparison_video
 
 DEMO_SEED = 987_654  # far from the seeds of the shipped training and validation sets
 #: The task of the demo's episodes.
@@ -29,11 +42,6 @@ DEMO_POLICY = "push-ppo"
 
 
 def _task(name: str, kind: str, num: int, out: Path, videos: int, horizon: int) -> dict[str, Any]:
-    from fignet_gym.data.generate import iter_trajectories
-    from fignet_gym.pretrained import load_pretrained
-    from fignet_gym.train.evaluation import rollout_metrics
-    from fignet_gym.train.report import plot_curves, print_table, write_comparison_video
-
     sim = load_pretrained(name)
     print(f"\n=== {name}: {num} fresh MuJoCo '{kind}' trajectories (seed {DEMO_SEED}) ===")
     t0 = time.perf_counter()
@@ -49,10 +57,6 @@ def _task(name: str, kind: str, num: int, out: Path, videos: int, horizon: int) 
 
 def _env_comparison(out: Path, steps: int = 40) -> dict[str, Any]:
     """Same action sequence on Push-v2 with MuJoCo and with FIGNet dynamics."""
-    import gymnasium as gym
-
-    import fignet_gym.envs  # noqa: F401 - registers the environments
-
     rng = np.random.default_rng(0)
     actions = np.clip(np.array([[1.0, 0.0]]) + 0.3 * rng.normal(size=(steps, 2)), -1, 1)
     result: dict[str, Any] = {}
@@ -81,16 +85,6 @@ def _env_comparison(out: Path, steps: int = 40) -> dict[str, Any]:
 def _mpc(out: Path, episodes: int, quick: bool) -> dict[str, Any]:
     """CEM on the learned model, CEM on MuJoCo and the shipped PPO policy, all acting in MuJoCo,
     on the same seeds."""
-    import gymnasium as gym
-    import imageio
-    import torch
-
-    import fignet_gym.envs  # noqa: F401  (registers the environments)
-    from fignet_gym.agents import PolicyAgent, make_planner, run_episode
-    from fignet_gym.agents.ppo import load_policy
-    from fignet_gym.dynamics import DYNAMICS_LABELS, MujocoDynamics, make_dynamics
-    from fignet_gym.tools.plan import _label, summarize
-
     torch.set_num_threads(1)
     budget = {"horizon": 3, "population": 6, "iterations": 1, "replan_every": 1} if quick else {}
     max_steps = 3 if quick else None
@@ -168,10 +162,11 @@ def _mpc(out: Path, episodes: int, quick: bool) -> dict[str, Any]:
 
 def _plot_mpc(curves: dict[str, list[list[float]]], labels: dict[str, str], path: Path) -> None:
     """Distance from the goal against time, every episode, one colour per agent."""
+    # deferred: Matplotlib's Agg backend is chosen here, when a plot is drawn, not on import
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # deferred: after the backend is chosen
 
     fig, ax = plt.subplots(figsize=(6, 3.5))
     for (name, eps), colour in zip(curves.items(), ("tab:blue", "tab:orange", "tab:green"), strict=False):

@@ -27,6 +27,7 @@ import numpy as np
 
 from fignet_gym.atomic import output_lock, write_text
 from fignet_gym.data.cli import int_at_least
+from fignet_gym.dynamics import DYNAMICS_LABELS, MujocoDynamics, make_dynamics
 
 BASELINES = ("idle", "random")
 #: Environment ids ``plan`` can act in (other packages' envs have no fignet_gym task).
@@ -106,8 +107,8 @@ def software() -> dict[str, str]:
     """Versions of the libraries whose numerics decide an episode: a planned episode is
     deterministic given its seed on one stack, but contact-rich episodes diverge between MuJoCo
     or torch versions (docs/experiments.md, Planning), so a line is not resumed across them."""
-    import mujoco
-    import torch
+    import mujoco  # deferred: versions are read only when a run starts
+    import torch  # deferred: fignet-gym --help loads this module's parser, torch costs seconds
 
     return {"mujoco": mujoco.__version__, "torch": torch.__version__}
 
@@ -269,9 +270,7 @@ class SideBySide:
 
     def __init__(self, env_id: str, env_kwargs: dict[str, Any], width: int = 320,
                  acting: str = "mujoco") -> None:
-        import gymnasium as gym
-
-        from fignet_gym.dynamics import DYNAMICS_LABELS
+        import gymnasium as gym  # deferred: the parser of this module loads with fignet-gym --help
 
         self.acting = DYNAMICS_LABELS.get(acting, acting)
         self.imagined = gym.make(env_id, render_mode="rgb_array", width=width, height=width,
@@ -294,7 +293,7 @@ class SideBySide:
 
     def write(self, path: Path, fps: int) -> None:
         """An mp4 of the collected frames."""
-        import imageio
+        import imageio  # deferred: only a run that writes videos needs it
 
         if self.frames:  # written whole, then renamed: a kill never leaves a cut video
             partial = path.with_name(path.stem + PARTIAL_VIDEO)
@@ -305,7 +304,7 @@ class SideBySide:
 
 def _label(frame: np.ndarray, text: str) -> np.ndarray:
     """``uint8[H, W, 3]`` with ``text`` in its top-left corner."""
-    from PIL import Image, ImageDraw
+    from PIL import Image, ImageDraw  # deferred: only a run that writes videos needs it
 
     img = Image.fromarray(frame)
     ImageDraw.Draw(img).text((6, 4), text, fill=(0, 0, 0))
@@ -314,16 +313,14 @@ def _label(frame: np.ndarray, text: str) -> np.ndarray:
 
 def fignet_env_ids() -> list[str]:
     """The registered ``fignet_gym/`` environment ids, sorted."""
-    import gymnasium as gym
-
-    import fignet_gym.envs  # noqa: F401  (registers the environments)
+    import gymnasium as gym  # deferred: loading it registers the ids; --help does not need them
 
     return sorted(k for k in gym.registry if k.startswith(ENV_NAMESPACE))
 
 
 def unknown_env(env_id: str) -> str | None:
     """The ``--env`` error line if ``env_id`` is not a registered Gymnasium id, else ``None``."""
-    import gymnasium as gym
+    import gymnasium as gym  # deferred: loading it registers the ids; --help does not need them
 
     ids = fignet_env_ids()
     return None if env_id in gym.registry else (
@@ -332,12 +329,11 @@ def unknown_env(env_id: str) -> str | None:
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Run the episodes, print the table, write ``OUT/summary.json``; returns the summary."""
-    import gymnasium as gym
-    import torch
+    import gymnasium as gym  # deferred: gymnasium, torch and the envs load when a run starts,
+    import torch  # deferred: not with fignet-gym --help, which builds this module's parser
 
-    import fignet_gym.envs  # noqa: F401  (registers the environments)
-    from fignet_gym.agents import IdleAgent, RandomAgent
-    from fignet_gym.envs.tasks import Task
+    from fignet_gym.agents import IdleAgent, RandomAgent  # deferred: torch (as above)
+    from fignet_gym.envs.tasks import Task  # deferred: gymnasium and MuJoCo (as above)
 
     check_arguments(args)
     torch.set_num_threads(args.threads)
@@ -391,8 +387,9 @@ def _run_episodes(args: argparse.Namespace, env: Any, agent: Any, label: str,
                   meta: dict[str, Any]) -> dict[str, Any]:
     """The episodes not yet in ``rows`` (their seeds generated lazily: ``--episodes`` may be
     huge), each written as it finishes: its video (atomically), then its row."""
-    from tqdm import tqdm
+    from tqdm import tqdm  # deferred: only a run needs it
 
+    # deferred: looked up when called, so a test can patch fignet_gym.agents.run_episode
     from fignet_gym.agents import run_episode
 
     rows_path = out / ROWS
@@ -428,10 +425,9 @@ def planning_agent(env_id: str, env: Any, planner: str, dynamics: str, act_dynam
     ``act_dynamics``) that plans on ``dynamics`` (``"mujoco"`` or ``"fignet"``, the latter from
     ``checkpoint``); ``budget`` goes to :func:`make_planner`. ``ValueError`` for a checkpoint of
     another scene, a checkpoint with MuJoCo, or a bad budget."""
-    import gymnasium as gym
+    import gymnasium as gym  # deferred: gymnasium and torch load when a run starts (--help)
 
-    from fignet_gym.agents import make_planner
-    from fignet_gym.dynamics import MujocoDynamics, make_dynamics
+    from fignet_gym.agents import make_planner  # deferred: torch, as gymnasium above
 
     scene = env.unwrapped.scene_type
     if dynamics == "mujoco":

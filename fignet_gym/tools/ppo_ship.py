@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.stats import binomtest
 
 from fignet_gym.agents.ppo.config import DYNAMICS, RunConfig
 from fignet_gym.agents.ppo.eval import EVAL_SEED
@@ -43,8 +44,6 @@ class ShipError(ValueError):
 
 def wilson_interval(successes: int, n: int) -> tuple[float, float]:
     """95% Wilson score interval ``(low, high)`` of a success rate from ``successes`` of ``n``."""
-    from scipy.stats import binomtest
-
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
     ci = binomtest(successes, n).proportion_ci(confidence_level=0.95, method="wilson")

@@ -17,15 +17,22 @@ on the training split, and the noise floor of the data's own tracking noise.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from fignet_gym.atomic import write_text
 from fignet_gym.data.format import Trajectory
-from fignet_gym.train.analytic import ContactParams
+from fignet_gym.dynamics.limit_surface import LimitSurfaceDynamics, fit_limit_surface
+from fignet_gym.simulator.scene import ObjectKind
+from fignet_gym.train.analytic import ContactParams, _axis_angle, _conj, _quat_mul
+from fignet_gym.train.metrics import predictor_metrics
+from fignet_gym.train.stats import paired_ratios
 
 #: The limit-surface grid: pusher-object friction and factor on the uniform-pressure radius.
 LS_FRICTIONS = (0.05, 0.1, 0.2, 0.3, 0.45, 0.65, 0.9, 1.3, 2.0, 3.0, 5.0)
@@ -44,8 +51,6 @@ def _yaw_about_z(q: np.ndarray) -> np.ndarray:
 
 def _rotation_vectors(q: np.ndarray) -> np.ndarray:
     """Rotation vectors ``float[T-1, 3]`` between consecutive unit quaternions ``float[T, 4]``."""
-    from fignet_gym.train.analytic import _axis_angle, _conj, _quat_mul
-
     return np.array([_axis_angle(_quat_mul(q[k + 1], _conj(q[k]))) for k in range(len(q) - 1)])
 
 
@@ -53,8 +58,6 @@ def tracking_noise(trajs: Sequence[Trajectory]) -> dict[str, float]:
     """Tracking noise of the dynamic objects: ``{"position_m": s_p, "rotation_deg": s_r}``,
     per axis, from robust second differences of positions and of rotation vectors (module
     docstring); ``planar`` says whether every object turned about z only."""
-    from fignet_gym.simulator.scene import ObjectKind
-
     dpos, drot, planar = [], [], True
     for t in trajs:
         for o in np.nonzero(t.kinds == int(ObjectKind.DYNAMIC))[0]:
@@ -81,9 +84,6 @@ def perturb_start(traj: Trajectory, given: int, position: float, rotation_deg: f
     """A copy of ``traj`` whose first ``given`` poses of dynamic objects carry independent
     Gaussian noise (``position`` m per axis, ``rotation_deg`` per axis; about z only if
     ``planar``, and no vertical noise then)."""
-    from fignet_gym.simulator.scene import ObjectKind
-    from fignet_gym.train.analytic import _quat_mul
-
     poses = np.array(traj.poses, float)
     for o in np.nonzero(traj.kinds == int(ObjectKind.DYNAMIC))[0]:
         for k in range(min(given, len(poses))):
@@ -106,7 +106,7 @@ def noise_floor(trajs: Sequence[Trajectory], params: Any, noise: dict[str, float
     scored against its unperturbed replay (:func:`~fignet_gym.train.evaluation.predictor_metrics`
     keys; medians over all perturbed replays), except that the ``*_ratio_still`` divide them by
     the real data's no-motion errors (the unit of every other row of the table)."""
-    from fignet_gym.train.evaluation import predictor_metrics
+    # deferred: sysid loads CMA-ES and Matplotlib (~0.9 s); evaluation imports LS_STEP from here
     from fignet_gym.train.sysid import ReplaySet
 
     t0 = time.process_time()
@@ -138,7 +138,7 @@ def fit_limit_surface_on(train: Sequence[Trajectory], given: int = 3, horizon: i
     """Fit :class:`LimitSurfaceDynamics` on ``train``: grid :data:`LS_FRICTIONS` x
     :data:`LS_SCALES`, loss :func:`~fignet_gym.train.sysid.replay_loss` on a seeded sample of
     ``fit_trajectories``; returns ``(tip_friction, pressure_scale, grid)``."""
-    from fignet_gym.dynamics.limit_surface import LimitSurfaceDynamics, fit_limit_surface
+    # deferred: sysid loads CMA-ES and Matplotlib (~0.9 s); evaluation imports LS_STEP from here
     from fignet_gym.train.sysid import ReplaySet, replay_loss
 
     rng = np.random.default_rng(seed)
@@ -158,8 +158,7 @@ def limit_surface_stage(train: Sequence[Trajectory], test: Sequence[Trajectory],
                         ) -> dict[str, Any]:
     """:func:`fit_limit_surface_on` ``train``, scored on ``test`` (``predictor_metrics`` keys,
     ``params``, ``grid``, ``cpu_seconds``)."""
-    from fignet_gym.dynamics.limit_surface import LimitSurfaceDynamics
-    from fignet_gym.train.evaluation import predictor_metrics
+    # deferred: sysid loads CMA-ES and Matplotlib (~0.9 s); evaluation imports LS_STEP from here
     from fignet_gym.train.sysid import ReplaySet
 
     t0 = time.process_time()
@@ -179,12 +178,6 @@ def run_stages(out: Any, train: Sequence[Trajectory], test: Sequence[Trajectory]
     ``limit_surface.json`` (pushes only: :func:`limit_surface_stage`, with paired ratios to the
     fitted MuJoCo metrics ``fitted``) and ``noise_floor.json`` (:func:`noise_floor` of the
     fitted MuJoCo at the training split's :func:`tracking_noise`)."""
-    import json
-    from pathlib import Path
-
-    from fignet_gym.atomic import write_text
-    from fignet_gym.train.evaluation import paired_ratios
-
     out = Path(out)
     res: dict[str, dict[str, Any]] = {}
     stages = [("noise_floor", lambda: noise_floor(test, fitted_params, tracking_noise(train), given,

@@ -37,10 +37,10 @@ def _pyplot() -> Any:
     Imported here, not at the top: it adds about a second to every import of the training loop,
     which scores rollouts but draws no plot.
     """
-    import matplotlib
+    import matplotlib  # deferred: about a second, and the backend choice, on plotting only (above)
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # deferred: after the backend is chosen
 
     return plt
 

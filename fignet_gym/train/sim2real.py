@@ -41,10 +41,24 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+import torch
+
 from fignet_gym.atomic import write_text
+from fignet_gym.data.format import TrajectoryFile, build_scene, load_trajectories
 from fignet_gym.data.guards import check_single_scene_type
 from fignet_gym.data.split import DEFAULT_FRACTIONS, file_split, group_members, write_split
+from fignet_gym.pretrained import load_pretrained
+from fignet_gym.simulator.config import SimulatorConfig
+from fignet_gym.simulator.scene import ObjectKind
+from fignet_gym.train.analytic import ContactParams
+from fignet_gym.train.config import load_run_config
+from fignet_gym.train.data_checks import same_dt
+from fignet_gym.train.evaluation import rollout_metrics
+from fignet_gym.train.metrics import predictor_metrics
+from fignet_gym.train.real_baselines import run_stages
 from fignet_gym.train.sim2real_report import format_table, headline, plot_sizes, summary_lines
+from fignet_gym.train.stats import paired_ratios, per_recording
+from fignet_gym.train.synthetic import check_tosses
 
 TrainFn = Callable[[Path, Path, "int | None", Path], Path]
 
@@ -84,7 +98,7 @@ def default_train(config: str = "cube-real", budget: int | None = None,
     of ``POLISH_MIN_SIZE`` or more trajectories are then polished through rollouts."""
 
     def train(train_file: Path, valid_file: Path, size: int | None, out_dir: Path) -> Path:
-        from fignet_gym.data.format import load_trajectories
+        # deferred: train.real loads the trainer and TensorBoard; `fignet-gym --help` imports this module
         from fignet_gym.train import real
 
         trajs = load_trajectories(train_file)
@@ -112,10 +126,6 @@ def _check_sizes(sizes: Sequence[int | None], n_train: int, data: str | os.PathL
 def _check_init_dt(data: str | os.PathLike, init: str) -> None:
     """Refuse to fine-tune ``init`` on data of another step: the model predicts one step of its
     own ``dt``, and ``evaluate`` would refuse the pairing too."""
-    from fignet_gym.data.format import TrajectoryFile
-    from fignet_gym.pretrained import load_pretrained
-    from fignet_gym.train.data_checks import same_dt
-
     dt = load_pretrained(init).config.dt
     with TrajectoryFile(data) as f:
         data_dt = f[0].dt
@@ -128,8 +138,6 @@ def _check_init_dt(data: str | os.PathLike, init: str) -> None:
 def _check_pretrain(data: str | os.PathLike, init: str | None, prior: str) -> None:
     """:class:`Sim2RealError` before anything is written if ``--pretrain`` cannot vary the
     data's trajectories: tosses start from scratch and know only the MuJoCo prior."""
-    from fignet_gym.data.format import TrajectoryFile
-
     with TrajectoryFile(data) as f:
         push = _has_kinematic(f[0])
     if not push and init is not None:
@@ -148,10 +156,6 @@ def rests_on_floor(trajs: Sequence[Any], clearance: float = FLOOR_CLEARANCE) -> 
     motion does not depend on gravity apart from the friction it loads, which the friction
     coefficients absorb.
     """
-    import torch
-
-    from fignet_gym.data.format import build_scene
-
     for traj in trajs:
         scene = build_scene(traj)
         dyn = scene.dynamic_mask
@@ -171,6 +175,7 @@ def push_space(kinematic: bool = True) -> tuple[Any, ...]:
     with ``kinematic`` objects (a pusher), their own friction: object-floor and tip-object
     friction, torsional friction, ``solref`` (the cone and the substeps are chosen as for any
     fit)."""
+    # deferred: sysid loads CMA-ES and Matplotlib (~0.9 s); `fignet-gym --help` imports this module
     from fignet_gym.train.sysid import DEFAULT_SPACE, KINEMATIC_ONLY
 
     return tuple(d for d in DEFAULT_SPACE if d.name != "gravity") + (KINEMATIC_ONLY if kinematic
@@ -178,18 +183,12 @@ def push_space(kinematic: bool = True) -> tuple[Any, ...]:
 
 
 def _has_kinematic(traj: Any) -> bool:
-    from fignet_gym.simulator.scene import ObjectKind
-
     return bool((traj.kinds == int(ObjectKind.KINEMATIC)).any())
 
 
 def prior_gravity(config: str, init: str | None = None) -> tuple[float, float, float]:
     """The gravity prior ``(gx, gy, gz)`` a model keeps when the data cannot measure one: the
     ``init`` checkpoint's own (a fine-tune), else the ``config`` preset's."""
-    from fignet_gym.pretrained import load_pretrained
-    from fignet_gym.simulator.config import SimulatorConfig
-    from fignet_gym.train.config import load_run_config
-
     if init is not None:
         return tuple(float(g) for g in load_pretrained(init).config.gravity)  # type: ignore[return-value]
 
@@ -227,7 +226,7 @@ def parse_sizes(values: Sequence[str]) -> list[int | None]:
 
 
 def _mujoco_metrics(trajs: list, params: Any, given: int, horizon: int) -> dict[str, Any]:
-    from fignet_gym.train.metrics import predictor_metrics
+    # deferred: sysid loads CMA-ES and Matplotlib (~0.9 s); `fignet-gym --help` imports this module
     from fignet_gym.train.sysid import ReplaySet
 
     rs = ReplaySet(trajs, given, horizon)
@@ -258,11 +257,10 @@ def run_sim2real(
     ``config`` and ``overrides`` are also the pretraining's recipe. ``polish``: polish the
     models of ``POLISH_MIN_SIZE`` or more trajectories through rollouts (``train_on_split``).
     """
-    from fignet_gym.data.format import load_trajectories
-    from fignet_gym.train.analytic import ContactParams
-    from fignet_gym.train.evaluation import rollout_metrics
+    # deferred: train.real loads the trainer and TensorBoard; `fignet-gym --help` imports this module
     from fignet_gym.train.real import run_cpu_hours
-    from fignet_gym.train.stats import paired_ratios
+
+    # deferred: sysid loads CMA-ES and Matplotlib (~0.9 s); `fignet-gym --help` imports this module
     from fignet_gym.train.sysid import env_parameters, fit_contact_params
 
     out = Path(out)
@@ -338,8 +336,6 @@ def run_sim2real(
         fitted = _mujoco_metrics(test, fitted_params, given, horizon)
         _write(out / "mujoco_fitted.json", fitted)
 
-    from fignet_gym.train.real_baselines import run_stages
-
     extra = run_stages(out, train, test, fitted_params, fitted, planar and space is not None
                        and any(_has_kinematic(t) for t in train), given, horizon,
                        fit_trajectories, seed)
@@ -373,8 +369,6 @@ def run_sim2real(
                 print(f"FIGNet on {label} training trajectories ...")
                 ckpt = train_fn(split_dir / "train.h5", split_dir / "valid.h5", size,
                                 out / f"fignet_{label}")
-                from fignet_gym.pretrained import load_pretrained
-
                 sim = load_pretrained(str(ckpt))
                 if sim.config.history + 1 != given:
                     raise Sim2RealError(f"{ckpt}: the model takes {sim.config.history + 1} poses, "
@@ -405,8 +399,6 @@ def run_sim2real(
     if len(group_members(fitted["horizon_trajectories"], fitted.get("groups_final"))) < \
             fitted["horizon_trajectories"]:
         # Several windows per recording (long real pushes): each recording counts once too.
-        from fignet_gym.train.stats import per_recording
-
         results["per_recording"] = {k: per_recording(r, fitted) for k, r in scored.items()}
     _write(results_path, results)
     table = format_table(results)
@@ -458,9 +450,11 @@ def _pretrain(train: list, valid: list, valid_file: Path, out: Path, num: int, *
     pusher) draw new pushes of the same objects (:mod:`fignet_gym.train.synthetic_push`) from
     ``prior``: ``"mujoco"``, ``"limit-surface"`` or ``"both"`` (half each), each fitted on
     ``train``, and pretrain from ``init`` (``None``: from scratch)."""
+    # deferred: train.real loads the trainer and TensorBoard; `fignet-gym --help` imports this module
     from fignet_gym.train.real import free_flight_gravity, train_on_split
-    from fignet_gym.train.sim2real_prior import synthetic_prior  # MuJoCo fits: only when pretraining
-    from fignet_gym.train.synthetic import check_tosses
+
+    # deferred: the synthetic prior fits MuJoCo (sysid: CMA-ES, Matplotlib); only when pretraining
+    from fignet_gym.train.sim2real_prior import synthetic_prior
 
     push = any(_has_kinematic(t) for t in train)
     if not push:

@@ -96,10 +96,11 @@ def format_table(results: dict[str, Any]) -> str:
 def plot_sizes(results: dict[str, Any], path: Path) -> None:
     """Errors (% of no motion) against training-set size: FIGNet points, MuJoCo (and, for pushes,
     limit-surface) lines."""
+    # deferred: Matplotlib loads, and its Agg backend is chosen, only when a plot is drawn
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # deferred: after the backend is chosen
 
     fig, axes = plt.subplots(1, 4, figsize=(15, 3.4))
     fg = sorted(results["fignet"].values(), key=lambda r: r["training_trajectories"])
@@ -177,10 +178,11 @@ def compare_runs(runs: dict[str, dict[str, Any]], out: Path) -> str:
 
 
 def _plot_compare(runs: dict[str, dict[str, Any]], path: Path) -> None:
+    # deferred: Matplotlib loads, and its Agg backend is chosen, only when a plot is drawn
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # deferred: after the backend is chosen
 
     first = next(iter(runs.values()))
     views = [("windows", lambda r, key: r.get(key), "translation_rmse_final", "translation"),
