@@ -15,10 +15,8 @@ from fignet_gym.envs import BatchedVectorEnv, SB3VecEnvAdapter, make_sb3_vec_env
 from fignet_gym.simulator.model import LearnedSimulator
 
 ENV_IDS = ["fignet_gym/Push-v2", "fignet_gym/Push-v1", "fignet_gym/PushT-v0", "fignet_gym/Toss-v0"]
-FAST = {"fignet_gym/Push-v2": {}, "fignet_gym/Push-v1": {}, "fignet_gym/Toss-v0": {"settle_steps": 3}}
-
-
-
+FAST = {"fignet_gym/Push-v2": {}, "fignet_gym/Push-v1": {}, "fignet_gym/PushT-v0": {},
+        "fignet_gym/Toss-v0": {"settle_steps": 3}}
 
 def make_kwargs(env_id: str, dynamics: str, sim: LearnedSimulator | None = None) -> dict[str, Any]:
     if dynamics == "mujoco":
