@@ -26,6 +26,7 @@ import numpy as np
 
 from fignet_gym.mjcf import prism_mesh, push_scene_text
 from fignet_gym.mjcf.assets import mesh_asset
+from fignet_gym.mjcf.push import _polygon_moments
 from fignet_gym.mjcf.pusht import PUSHT_DENSITY, pusht_scene_xml
 
 THICKNESS = 0.013
@@ -52,19 +53,11 @@ SHAPES: dict[str, list[np.ndarray]] = {
 }
 
 
-def _area_and_centroid(poly: np.ndarray) -> tuple[float, np.ndarray]:
-    x, y = poly[:, 0], poly[:, 1]
-    cross = x * np.roll(y, -1) - np.roll(x, -1) * y
-    area = cross.sum() / 2
-    c = np.array([((x + np.roll(x, -1)) * cross).sum(), ((y + np.roll(y, -1)) * cross).sum()])
-    return float(area), c / (6 * area)
-
-
 def shape_xml(name: str) -> str:
     """The push scene of ``SHAPES[name]``: each piece a mesh geom, the frame at the centroid;
     MuJoCo computes mass and inertia from the meshes at the T's density."""
     pieces = SHAPES[name]
-    moments = [_area_and_centroid(p) for p in pieces]
+    moments = [_polygon_moments(p)[:2] for p in pieces]
     total = sum(a for a, _ in moments)
     centroid = sum(a * c for a, c in moments) / total
     meshes, geoms = [], []
@@ -73,14 +66,12 @@ def shape_xml(name: str) -> str:
         meshes.append(mesh_asset(f"piece{k}", verts, faces))
         geoms.append(f'<geom type="mesh" mesh="piece{k}" density="{PUSHT_DENSITY}" '
                      f'friction="0.25 0.005 0.0001" solref="0.005 1"/>')
-    xml = push_scene_text(
+    return push_scene_text(
         name.replace(" ", "_"), timestep=0.002, meshes="\n    ".join(meshes),
-        geoms="\n      ".join(geoms), mass=1.0, com=np.zeros(3), inertia=np.ones(6),
+        geoms="\n      ".join(geoms), mass=None, com=None, inertia=None,
         thickness=THICKNESS, object_pose=(0.0, 0.0, 0.0), tip_xy=(-0.15, 0.0), tip_z=0.021,
         tip_radius=0.00475, tip_half_height=0.02, floor_half_size=0.5, friction=0.25,
         tip_friction=0.25, contact_timeconst=0.005, tip_dampratio=0.5, cone="elliptic")
-    start = xml.index("<inertial")  # the meshes' own inertia, not a written one
-    return xml[:start] + xml[xml.index("/>", start) + 2:]
 
 
 def main(argv: list[str] | None = None) -> dict[str, dict[str, list[float]]]:

@@ -184,18 +184,23 @@ def push_scene_xml(
 
 
 def push_scene_text(
-    name: str, *, timestep: float, meshes: str, geoms: str, mass: float, com: np.ndarray,
-    inertia: np.ndarray, thickness: float, object_pose: Sequence[float], tip_xy: Sequence[float],
+    name: str, *, timestep: float, meshes: str, geoms: str, mass: float | None,
+    com: np.ndarray | None, inertia: np.ndarray | None, thickness: float,
+    object_pose: Sequence[float], tip_xy: Sequence[float],
     tip_z: float, tip_radius: float, tip_half_height: float, floor_half_size: float,
     friction: float, tip_friction: float, contact_timeconst: float, tip_dampratio: float,
     cone: str,
 ) -> str:
     """MJCF text of a pushing scene: floor, a free ``object`` body holding ``geoms`` (MJCF text of
     its geoms over the ``meshes`` assets), with ``com float[3]`` and ``inertia float[6]``
-    (full inertia), and the mocap ``tip`` cylinder, under friction ``cone``. Shared by
-    :func:`push_scene_xml` and the real-outline scenes of :mod:`fignet_gym.data.mit_scene`."""
+    (full inertia; ``mass=None``: MuJoCo's own from the geoms), and the mocap ``tip`` cylinder,
+    under friction ``cone``. Shared by :func:`push_scene_xml`, :func:`~fignet_gym.mjcf.pusht_scene_xml`
+    and the real-outline scenes of :mod:`fignet_gym.data.mit_scene`."""
     x, y, yaw = (float(v) for v in object_pose)
     solref = f'{contact_timeconst} 1'
+    # mass None: MuJoCo computes mass and inertia from the geoms (their density).
+    inertial = "" if mass is None else (f'<inertial pos="{fmt_numbers(com)}" mass="{mass}" '
+                                        f'fullinertia="{fmt_numbers(inertia)}"/>')
     return f"""<mujoco model="{name}">
   <compiler angle="radian"/>
   <option timestep="{timestep}" gravity="0 0 -9.81" cone="{check_cone(cone)}"/>
@@ -212,7 +217,7 @@ def push_scene_text(
           friction="{friction_attr(friction)}" priority="1" solref="{solref}"/>
     <body name="object" pos="{x} {y} {thickness / 2}" quat="{fmt_numbers(yaw_quat(yaw))}">
       <freejoint name="object"/>
-      <inertial pos="{fmt_numbers(com)}" mass="{mass}" fullinertia="{fmt_numbers(inertia)}"/>
+      {inertial}
       {geoms}
     </body>
     <body name="tip" mocap="true" pos="{float(tip_xy[0])} {float(tip_xy[1])} {tip_z}">
