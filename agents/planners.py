@@ -41,7 +41,24 @@ import mujoco
 import numpy as np
 
 from fignet_gym.agents.task import PlanningProblem, problem_for
+from fignet_gym.checks import Range, SettingError, check_settings
 from fignet_gym.dynamics import STATE_SPEC, Dynamics
+
+#: Allowed values of the sampling settings both planner configs share (and ``replan_every`` at
+#: most ``horizon``).
+SAMPLING_RANGES: dict[str, Range] = {
+    "horizon": Range("int", low=1),
+    "population": Range("int", low=2),
+    "iterations": Range("int", low=1),
+    "replan_every": Range("int", low=1),
+    "noise_std": Range("float", low=0, low_open=True),
+    "noise_correlation": Range("float", 0, 1, high_open=True),
+}
+#: :class:`CEMConfig`'s (and ``elites`` at most ``population``).
+CEM_RANGES: dict[str, Range] = {**SAMPLING_RANGES, "elites": Range("int", low=1),
+                                "min_std": Range("float", low=0)}
+#: :class:`MPPIConfig`'s.
+MPPI_RANGES: dict[str, Range] = {**SAMPLING_RANGES, "temperature": Range("float", low=0, low_open=True)}
 
 
 @dataclass(frozen=True)
@@ -80,11 +97,10 @@ class CEMConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        _check_common(self)
-        if not 1 <= self.elites <= self.population:
-            raise ValueError(f"elites must be in [1, population], got {self.elites}")
-        if self.min_std < 0:
-            raise ValueError(f"min_std must be >= 0, got {self.min_std}")
+        check_settings(self, CEM_RANGES)
+        _check_replan(self)
+        if self.elites > self.population:
+            raise SettingError("elites", f"must be in [1, population], got {self.elites}")
 
 
 @dataclass(frozen=True)
@@ -117,25 +133,14 @@ class MPPIConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        _check_common(self)
-        if self.temperature <= 0:
-            raise ValueError(f"temperature must be > 0, got {self.temperature}")
+        check_settings(self, MPPI_RANGES)
+        _check_replan(self)
 
 
-def _check_common(config: CEMConfig | MPPIConfig) -> None:
-    """Raise ``ValueError`` on the sampling settings both planner configs share."""
-    horizon, population, iterations = config.horizon, config.population, config.iterations
-    noise_std, rho, replan_every = config.noise_std, config.noise_correlation, config.replan_every
-    if not 1 <= replan_every <= horizon:
-        raise ValueError(f"replan_every must be in [1, horizon], got {replan_every}")
-    if not 0.0 <= rho < 1.0:
-        raise ValueError(f"noise_correlation must be in [0, 1), got {rho}")
-    if horizon < 1 or population < 2 or iterations < 1:
-        raise ValueError(
-            f"need horizon >= 1, population >= 2, iterations >= 1; got {horizon}, {population}, {iterations}"
-        )
-    if noise_std <= 0:
-        raise ValueError(f"noise_std must be > 0, got {noise_std}")
+def _check_replan(config: CEMConfig | MPPIConfig) -> None:
+    """:class:`~fignet_gym.checks.SettingError` unless ``replan_every`` is at most ``horizon``."""
+    if config.replan_every > config.horizon:
+        raise SettingError("replan_every", f"must be in [1, horizon], got {config.replan_every}")
 
 
 @dataclass(frozen=True)

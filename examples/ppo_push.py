@@ -28,7 +28,7 @@ from pathlib import Path
 
 from fignet_gym.agents.ppo import RunConfig, run_ppo, transfer_table
 from fignet_gym.agents.ppo.shipped import policies_dir
-from fignet_gym.tools.ppo_ship import ship_policy
+from fignet_gym.agents.ppo.ship import ship_policy
 
 #: The shipped policy whose recipe this example trains.
 SHIPPED = "push-ppo"

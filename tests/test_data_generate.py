@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 from dataclasses import replace
 from pathlib import Path
 
@@ -10,8 +9,8 @@ import mujoco
 import numpy as np
 import pytest
 
+from fignet_gym.cli import main
 from fignet_gym.data import generate as gen
-from fignet_gym.data.cli import register
 from fignet_gym.data.format import INCOMPLETE_SUFFIX, TrajectoryFile, load_trajectories
 from fignet_gym.mjcf import MATERIALS, MIT_OBJECTS, TOSS_SHAPES
 from fignet_gym.simulator.scene import ObjectKind
@@ -20,10 +19,7 @@ SHORT_TOSS = replace(gen.TossConfig(), duration=0.3)
 
 
 def _run_cli(*argv: str) -> int:
-    parser = argparse.ArgumentParser()
-    register(parser.add_subparsers(dest="cmd", required=True))
-    args = parser.parse_args(argv)
-    return args.func(args)
+    return main(list(argv))
 
 
 def test_same_seed_same_data_for_any_worker_count() -> None:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import imageio.v2 as imageio
@@ -10,8 +9,8 @@ import mujoco
 import numpy as np
 import pytest
 
+from fignet_gym.cli import main
 from fignet_gym.data import viewer
-from fignet_gym.data.cli import register
 from fignet_gym.data.format import ObjectMeshes, Trajectory, write_trajectories
 from fignet_gym.data.generate import PushConfig, _one
 from fignet_gym.mjcf import push_scene_xml
@@ -80,12 +79,8 @@ def test_mesh_only_trajectory_and_cli_show(gl_ok: None, tmp_path: Path) -> None:
                                           np.zeros((2, 3))), name="tet")
     path = tmp_path / "d.h5"
     write_trajectories(path, [traj])
-    parser = argparse.ArgumentParser()
-    register(parser.add_subparsers(dest="cmd", required=True))
     out = tmp_path / "tet.gif"
-    args = parser.parse_args(["show", str(path), "--traj", "0", "--out", str(out),
-                              "--width", "64", "--height", "64"])
-    assert args.func(args) == 0
+    assert main(["show", str(path), "--traj", "0", "--out", str(out),
+                              "--width", "64", "--height", "64"]) == 0
     assert len(imageio.mimread(out)) == 3
-    args = parser.parse_args(["show", str(path), "--traj", "4", "--out", str(out)])
-    assert args.func(args) == 2
+    assert main(["show", str(path), "--traj", "4", "--out", str(out)]) == 2

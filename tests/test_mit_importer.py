@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import copy
 import json
 import math
@@ -13,8 +12,8 @@ import mujoco
 import numpy as np
 import pytest
 
+from fignet_gym.cli import main
 from fignet_gym.data import mit_geometry as geo
-from fignet_gym.data.cli import register
 from fignet_gym.data.format import load_trajectories, write_trajectories
 from fignet_gym.data.mit import (
     DataImportError,
@@ -138,12 +137,9 @@ def test_selection_and_cli(tmp_path: Path) -> None:
         import_mit([src], out, only_pu, protocol=WHOLE)
     sel = MitSelection(surfaces=None, shapes=("rect1",))
     assert import_mit([src], out, sel, protocol=WHOLE).windows == 2
-    parser = argparse.ArgumentParser()
-    register(parser.add_subparsers(dest="cmd", required=True))
-    args = parser.parse_args(["import-mit", str(src), "--out", str(out), "--surface", "any",
+    assert main(["import-mit", str(src), "--out", str(out), "--surface", "any",
                               "--any-acceleration", "--duration", "0", "--start", "file",
-                              "--dt", "0.02", "--keep-still", "--force"])
-    assert args.func(args) == 0
+                              "--dt", "0.02", "--keep-still", "--force"]) == 0
     trajs = load_trajectories(out)
     assert len(trajs) == 4 and max(t.num_steps for t in trajs) == 40
 
@@ -168,10 +164,7 @@ def test_bad_input_names_file_and_field(tmp_path: Path, capsys) -> None:
     out = tmp_path / "out.h5"  # a bad file aborts an import without touching an existing output
     write_trajectories(out, [_one(_write_raw(tmp_path, shape="rect2"))])
     before = out.read_bytes()
-    parser = argparse.ArgumentParser()
-    register(parser.add_subparsers(dest="cmd", required=True))
-    args = parser.parse_args(["import-mit", str(tmp_path), "--out", str(out), "--force"])
-    assert args.func(args) == 2
+    assert main(["import-mit", str(tmp_path), "--out", str(out), "--force"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "Traceback" not in err and "field '" in err
     assert out.read_bytes() == before
@@ -254,11 +247,8 @@ def test_sample_windows_start_at_contact_and_mujoco_agrees(sample_report) -> Non
 
 
 def test_check_cli_reports_every_shape(tmp_path: Path, capsys) -> None:
-    parser = argparse.ArgumentParser()
-    register(parser.add_subparsers(dest="cmd", required=True))
     out = tmp_path / "check.json"
-    args = parser.parse_args(["check-mit", str(SAMPLE), "--json", str(out)])
-    assert args.func(args) == 0
+    assert main(["check-mit", str(SAMPLE), "--json", str(out)]) == 0
     text = capsys.readouterr().out
     assert "butter" in text and "ellip3" in text and "still (never moves the object)" in text
     check = json.loads(out.read_text())

@@ -16,11 +16,11 @@ import pytest
 import fignet_gym.agents.ppo.shipped as shipped
 from fignet_gym.agents.ppo import load_policy, load_run_policy
 from fignet_gym.agents.ppo.config import RunConfig
+from fignet_gym.agents.ppo.options import config_from_args
 from fignet_gym.agents.ppo.run import run_ppo
 from fignet_gym.agents.ppo.rundir import RunError
+from fignet_gym.agents.ppo.ship import wilson_interval
 from fignet_gym.cli import build_parser, main
-from fignet_gym.tools.ppo import config_from_args
-from fignet_gym.tools.ppo_ship import wilson_interval
 from tests.test_ppo_run import TINY as TINY_RUN
 
 #: test_ppo_run's tiny run on Push-v1 for two iterations; evaluated after each and on 3 final episodes.

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 from dataclasses import replace
 from pathlib import Path
@@ -12,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 
-from fignet_gym.data.cli import register
+from fignet_gym.cli import main
 from fignet_gym.data.format import (
     TrajectoryFormatError,
     build_scene,
@@ -44,10 +43,7 @@ def _track(T: int = 5) -> np.ndarray:
 
 
 def _cli(*argv: str) -> int:
-    p = argparse.ArgumentParser()
-    register(p.add_subparsers(dest="command", required=True))
-    args = p.parse_args(list(argv))
-    return int(args.func(args))
+    return main(list(argv))
 
 
 # --------------------------------------------------------------------------- tracks + MJCF

@@ -1,5 +1,5 @@
 """PPO-loop throughput: environment steps per CPU-second of ``PPO.learn`` (rollouts and updates),
-the figure that bounds how many steps a PPO run can afford (``fignet-gym bench --ppo``)."""
+the figure that bounds how many steps a PPO run can afford (``fignet-gym bench ppo``)."""
 
 from __future__ import annotations
 

@@ -7,10 +7,11 @@ stable-baselines3 after the first update.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
+
+from fignet_gym.checks import Range, SettingError, check_settings
 
 #: The environment a run trains on unless told otherwise: the current Push version.
 PUSH_ID = "fignet_gym/Push-v2"
@@ -37,41 +38,43 @@ MAX_SHAPING = 100.0
 MAX_BONUS = 1000.0
 
 
-class ConfigError(ValueError):
-    """A setting outside its range; ``setting`` names the field (the CLI maps it to its option)."""
+#: The error of a setting outside its range (``setting``: the field, which the CLI maps to its
+#: option; ``detail``: ``"must be ..., got ..."``); the name the CLI imports.
+ConfigError = SettingError
 
-    def __init__(self, setting: str, message: str) -> None:
-        super().__init__(f"{setting} {message}")
-        self.setting = setting
-        self.detail = message
-
-
-def _finite(x: Any) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-
-
-def _integer(x: Any) -> bool:
-    return isinstance(x, int) and not isinstance(x, bool)
-
-
-#: ``field -> (check, allowed values in words)`` for every :class:`PPOConfig` field but ``net_arch``.
-PPO_RANGES: dict[str, tuple[Any, str]] = {
-    "total_timesteps": (lambda x: _integer(x) and x >= 1, "an integer >= 1"),
-    "num_envs": (lambda x: _integer(x) and 1 <= x <= MAX_NUM_ENVS, f"an integer in [1, {MAX_NUM_ENVS}]"),
-    "n_steps": (lambda x: _integer(x) and 1 <= x <= MAX_N_STEPS, f"an integer in [1, {MAX_N_STEPS}]"),
-    "batch_size": (lambda x: _integer(x) and x >= 1, "an integer >= 1 (at most n_steps * num_envs)"),
-    "n_epochs": (lambda x: _integer(x) and 1 <= x <= 1000, "an integer in [1, 1000]"),
-    "learning_rate": (lambda x: _finite(x) and 0 < x <= 1, "a number in (0, 1]"),
-    "gamma": (lambda x: _finite(x) and 0 <= x <= 1, "a number in [0, 1]"),
-    "gae_lambda": (lambda x: _finite(x) and 0 <= x <= 1, "a number in [0, 1]"),
-    "clip_range": (lambda x: _finite(x) and 0 < x <= 1, "a number in (0, 1]"),
-    "ent_coef": (lambda x: _finite(x) and 0 <= x <= 1, "a number in [0, 1]"),
-    "log_std_init": (lambda x: _finite(x) and LOG_STD_RANGE[0] <= x <= LOG_STD_RANGE[1],
-                     f"a number in [{LOG_STD_RANGE[0]:g}, {LOG_STD_RANGE[1]:g}]"),
-    "use_sde": (lambda x: isinstance(x, bool), "true or false"),
-    "sde_sample_freq": (lambda x: _integer(x) and x >= -1 and x != 0, "-1 or an integer >= 1"),
-    "seed": (lambda x: _integer(x) and 0 <= x <= MAX_SEED, f"an integer in [0, {MAX_SEED}]"),
-    "torch_threads": (lambda x: x is None or (_integer(x) and x >= 1), "None or an integer >= 1"),
+#: ``field -> allowed values`` of every :class:`PPOConfig` field but ``net_arch``.
+PPO_RANGES: dict[str, Range] = {
+    "total_timesteps": Range("int", low=1),
+    "num_envs": Range("int", 1, MAX_NUM_ENVS),
+    "n_steps": Range("int", 1, MAX_N_STEPS),
+    "batch_size": Range("int", low=1),  # and at most n_steps * num_envs
+    "n_epochs": Range("int", 1, 1000),
+    "learning_rate": Range("float", 0, 1, low_open=True),
+    "gamma": Range("float", 0, 1),
+    "gae_lambda": Range("float", 0, 1),
+    "clip_range": Range("float", 0, 1, low_open=True),
+    "ent_coef": Range("float", 0, 1),
+    "log_std_init": Range("float", *LOG_STD_RANGE),
+    "use_sde": Range("bool"),
+    "sde_sample_freq": Range("int", low=1, also=(-1,)),
+    "seed": Range("int", 0, MAX_SEED),
+    "torch_threads": Range("int", low=1, none_ok=True),
+}
+#: One hidden layer's size in ``net_arch``.
+_LAYER = Range("int", 1, MAX_LAYER)
+#: ``field -> allowed values`` of the scalar :class:`RunConfig` fields (``env_id``, ``simulator``,
+#: ``norm_obs`` and ``norm_reward`` are not checked here).
+RUN_RANGES: dict[str, Range] = {
+    "precision": Range("str", choices=PRECISIONS),
+    "curriculum": Range("bool"),
+    "observation": Range("str", choices=OBSERVATIONS),
+    "shaping": Range("float", 0, MAX_SHAPING),
+    "success_bonus": Range("float", 0, MAX_BONUS),
+    "dynamics": Range("str", choices=DYNAMICS),
+    "eval_every": Range("int", low=0),
+    "checkpoint_every": Range("int", low=1),
+    "eval_episodes": Range("int", low=1),
+    "final_episodes": Range("int", low=1),
 }
 
 
@@ -99,7 +102,8 @@ class PPOConfig:
             cores, and the small policy gains nothing from more), else torch's current setting.
 
     Raises:
-        ConfigError: a setting outside its range (:data:`PPO_RANGES`).
+        ConfigError: a setting outside its range (:data:`PPO_RANGES`; ``batch_size`` at most
+            ``n_steps * num_envs``, ``net_arch`` one or more sizes in ``[1, MAX_LAYER]``).
     """
 
     total_timesteps: int = 200_000
@@ -120,10 +124,7 @@ class PPOConfig:
     torch_threads: int | None = None
 
     def __post_init__(self) -> None:
-        for name, (ok, allowed) in PPO_RANGES.items():
-            value = getattr(self, name)
-            if not ok(value):
-                raise ConfigError(name, f"must be {allowed}, got {value!r}")
+        check_settings(self, PPO_RANGES)
         if self.batch_size > self.n_steps * self.num_envs:
             raise ConfigError(
                 "batch_size",
@@ -131,8 +132,7 @@ class PPOConfig:
                 f"{self.n_steps * self.num_envs}, got {self.batch_size}",
             )
         arch = self.net_arch
-        if not (isinstance(arch, tuple) and arch
-                and all(_integer(n) and 1 <= n <= MAX_LAYER for n in arch)):
+        if not (isinstance(arch, tuple) and arch and all(_LAYER.accepts(n) for n in arch)):
             raise ConfigError("net_arch", f"must be one or more integers in [1, {MAX_LAYER}], got {arch!r}")
 
 
@@ -187,24 +187,7 @@ class RunConfig:
     precision: str = "float32"
 
     def __post_init__(self) -> None:
-        if self.precision not in PRECISIONS:
-            raise ConfigError("precision", f"must be one of {PRECISIONS}, got {self.precision!r}")
-        if not isinstance(self.curriculum, bool):
-            raise ConfigError("curriculum", f"must be true or false, got {self.curriculum!r}")
-        if self.observation not in OBSERVATIONS:
-            raise ConfigError("observation", f"must be one of {OBSERVATIONS}, got {self.observation!r}")
-        if not (_finite(self.shaping) and 0 <= self.shaping <= MAX_SHAPING):
-            raise ConfigError("shaping", f"must be a number in [0, {MAX_SHAPING:g}], got {self.shaping!r}")
-        if not (_finite(self.success_bonus) and 0 <= self.success_bonus <= MAX_BONUS):
-            raise ConfigError("success_bonus",
-                              f"must be a number in [0, {MAX_BONUS:g}], got {self.success_bonus!r}")
-        if self.dynamics not in DYNAMICS:
-            raise ConfigError("dynamics", f"must be one of {DYNAMICS}, got {self.dynamics!r}")
-        if not (_integer(self.eval_every) and self.eval_every >= 0):
-            raise ConfigError("eval_every", f"must be an integer >= 0, got {self.eval_every!r}")
-        for name in ("checkpoint_every", "eval_episodes", "final_episodes"):
-            if not (_integer(getattr(self, name)) and getattr(self, name) >= 1):
-                raise ConfigError(name, f"must be an integer >= 1, got {getattr(self, name)!r}")
+        check_settings(self, RUN_RANGES)
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dictionary (``net_arch`` as a list)."""

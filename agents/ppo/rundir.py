@@ -42,7 +42,7 @@ POLICY = "policy.zip"
 FINAL_EVAL = "final_eval.json"
 
 
-class RunError(Exception):
+class RunError(ValueError):
     """A user error about a run folder (exists, not resumable, settings differ)."""
 
 

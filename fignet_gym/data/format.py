@@ -57,6 +57,11 @@ MAX_FIELD_BYTES = 1 << 28
 PROPS_RTOL, PROPS_ATOL = 1e-4, 1e-5
 
 
+class TrajectoryIndexError(IndexError, ValueError):
+    """A trajectory index beyond the file (an ``IndexError`` for sequence use; a ``ValueError``, so
+    the command line reports it in one line as any other bad input)."""
+
+
 class TrajectoryFormatError(ValueError):
     """A malformed trajectory file or record; the message names the file, trajectory and field."""
 
@@ -422,7 +427,7 @@ class TrajectoryFile:
 
     def __getitem__(self, index: int) -> Trajectory:
         if not -len(self) <= index < len(self):
-            raise IndexError(f"{self.path}: trajectory index {index} out of range "
+            raise TrajectoryIndexError(f"{self.path}: trajectory index {index} out of range "
                              f"(the file holds {len(self)})")
         key = self._keys[index]
         try:

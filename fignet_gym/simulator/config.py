@@ -7,37 +7,38 @@ model computes, so they live in :class:`fignet_gym.train.config.TrainConfig`.
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
+from fignet_gym.checks import Range, SettingError, check_settings, check_value
 from fignet_gym.simulator.graph import FaceGroup, enabled_face_groups
 from fignet_gym.simulator.scene import MeshOptions
 
-#: Inclusive ``(low, high)`` bounds of numeric config fields (the paper's model: history 2,
+#: Allowed values of the numeric config fields (inclusive bounds; the paper's model: history 2,
 #: latent 128, 10 blocks). Anything outside is refused in checkpoints and new configs alike, so a
 #: config asking for ``10**7`` processor blocks is refused instead of exhausting memory.
-CONFIG_BOUNDS: dict[str, tuple[float, float]] = {
-    "dt": (1e-6, 10.0),
-    "history": (1, 16),
-    "latent_size": (1, 4096),
-    "hidden_size": (1, 8192),
-    "message_passing_steps": (1, 64),
-    "collision_radius": (1e-6, 100.0),
-    "feature_clip": (0.0, 1e4),
+CONFIG_BOUNDS: dict[str, Range] = {
+    "dt": Range("float", 1e-6, 10.0),
+    "history": Range("int", 1, 16),
+    "latent_size": Range("int", 1, 4096),
+    "hidden_size": Range("int", 1, 8192, none_ok=True),  # None: latent_size
+    "message_passing_steps": Range("int", 1, 64),
+    "collision_radius": Range("float", 1e-6, 100.0),
+    "feature_clip": Range("float", 0.0, 1e4),
 }
-#: Integer fields among :data:`CONFIG_BOUNDS`.
-_INTEGER_FIELDS = frozenset({"history", "latent_size", "hidden_size", "message_passing_steps"})
+#: Collision edge kinds (``SimulatorConfig.collision``).
+COLLISIONS = ("face", "node")
 #: Bounds of gravity components (m/s^2).
 GRAVITY_BOUND = 1e3
-#: Bounds of the mesh options (each level multiplies node counts, so they are kept small).
-MESH_BOUNDS: dict[str, tuple[float, float]] = {
-    "sphere_subdivisions": (0, 5),
-    "cylinder_sections": (3, 256),
-    "capsule_rings": (1, 64),
-    "box_subdivisions": (0, 5),
-    "plane_half_size": (1e-3, 1e5),
-    "plane_cells": (1, 256),
+_GRAVITY = Range("float", -GRAVITY_BOUND, GRAVITY_BOUND)
+#: Allowed values of the mesh options (each level multiplies node counts, so they are kept small).
+MESH_BOUNDS: dict[str, Range] = {
+    "sphere_subdivisions": Range("int", 0, 5),
+    "cylinder_sections": Range("int", 3, 256),
+    "capsule_rings": Range("int", 1, 64),
+    "box_subdivisions": Range("int", 0, 5),
+    "plane_half_size": Range("float", 1e-3, 1e5),
+    "plane_cells": Range("int", 1, 256),
 }
 
 
@@ -100,13 +101,9 @@ class SimulatorConfig:
     mesh_options: MeshOptions = field(default_factory=MeshOptions)
 
     def __post_init__(self) -> None:
-        if self.collision not in ("face", "node"):
-            raise ValueError(f"collision must be 'face' or 'node', got {self.collision!r}")
-        if self.history < 1 or self.dt <= 0 or self.collision_radius <= 0:
-            raise ValueError("history >= 1, dt > 0 and collision_radius > 0 are required")
+        check_config(self)  # bounded sizes: a config can never ask for unbounded memory
         if self.canonical_frame and any(g != 0 for g in self.gravity[:2]):
             raise ValueError(f"canonical_frame needs vertical gravity, got {self.gravity}")
-        check_config(self)  # bounded sizes: a config can never ask for unbounded memory
 
     @property
     def face_groups(self) -> tuple[FaceGroup, ...]:
@@ -131,31 +128,22 @@ class SimulatorConfig:
         return SimulatorConfig(**d)
 
 
-def _check_number(name: str, value: Any, lo: float, hi: float, integer: bool) -> None:
-    if integer and (isinstance(value, bool) or not isinstance(value, int)):
-        raise ValueError(f"{name} must be an integer, got {value!r}")
-    if not integer and (isinstance(value, bool) or not isinstance(value, (int, float))):
-        raise ValueError(f"{name} must be a number, got {value!r}")
-    if not (math.isfinite(value) and lo <= value <= hi):
-        raise ValueError(f"{name} must be in [{lo:g}, {hi:g}], got {value!r}")
+#: The flags (every ``bool`` field), ``collision`` and ``scene_type``.
+_KIND_BOUNDS: dict[str, Range] = {
+    **{f.name: Range("bool") for f in fields(SimulatorConfig) if f.type in ("bool", bool)},
+    "collision": Range("str", choices=COLLISIONS),
+    "scene_type": Range("str"),
+}
 
 
 def check_config(config: SimulatorConfig) -> None:
-    """``ValueError`` naming the first field of ``config`` of the wrong type or out of bounds."""
-    for name, (lo, hi) in CONFIG_BOUNDS.items():
-        value = getattr(config, name)
-        if name == "hidden_size" and value is None:
-            continue
-        _check_number(name, value, lo, hi, name in _INTEGER_FIELDS)
+    """:class:`~fignet_gym.checks.SettingError` (a ``ValueError``) naming the first field of
+    ``config`` of the wrong type or out of bounds (:data:`CONFIG_BOUNDS`, gravity, the flags,
+    ``collision``, ``scene_type``, :data:`MESH_BOUNDS` as ``mesh_options.<field>``)."""
+    check_settings(config, CONFIG_BOUNDS)
     if len(config.gravity) != 3:
-        raise ValueError(f"gravity must have 3 entries, got {config.gravity!r}")
+        raise SettingError("gravity", f"must have 3 entries, got {config.gravity!r}")
     for g in config.gravity:
-        _check_number("gravity", g, -GRAVITY_BOUND, GRAVITY_BOUND, False)
-    for f in fields(SimulatorConfig):
-        if f.type in ("bool", bool) and not isinstance(getattr(config, f.name), bool):
-            raise ValueError(f"{f.name} must be true or false, got {getattr(config, f.name)!r}")
-    if not isinstance(config.scene_type, str):
-        raise ValueError(f"scene_type must be a string, got {config.scene_type!r}")
-    mo = config.mesh_options
-    for name, (lo, hi) in MESH_BOUNDS.items():
-        _check_number(f"mesh_options.{name}", getattr(mo, name), lo, hi, name != "plane_half_size")
+        check_value("gravity", g, _GRAVITY)
+    check_settings(config, _KIND_BOUNDS)
+    check_settings(config.mesh_options, MESH_BOUNDS, "mesh_options.")

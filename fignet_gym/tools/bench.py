@@ -1,4 +1,4 @@
-"""Speed of one learned step against MuJoCo on the same scene (``fignet-gym bench``).
+"""Speed of one learned step against MuJoCo on the same scene (``fignet-gym bench step``).
 
 Prints, for a push scene (one MIT prism, a cylindrical pusher, a floor) and a 6-object tossing scene
 of MOVi-A-like size: the median milliseconds of ``LearnedSimulator.step`` (the code path users run)
@@ -8,12 +8,12 @@ shared cores are noisy: compare the ratios, measured in one run, rather than abs
 machine whose cores are busy, use ``--threads 1``: OpenMP threads spin-waiting for a descheduled peer
 make more threads much slower (``OMP_WAIT_POLICY=PASSIVE`` limits the damage).
 
-``--shipped``: the shipped models at each ``--batch`` size, stepped as ``FIGNetDynamics`` does,
-with the network's analytic FLOPs and its GFLOP/s next to plain ``torch.mm`` on the same shapes
-(:mod:`fignet_gym.tools.bench_limits`). ``--rollout``: ``Dynamics.rollout`` scene-steps per second,
-learned against ``mujoco.rollout``. ``--ppo``: env steps per CPU-second of the whole PPO loop on
-MuJoCo and on FIGNet (:mod:`fignet_gym.agents.ppo.bench`; ``--repeats`` is its number of
-repetitions). ``--json PATH`` writes their figures. Timings are CPU seconds.
+``bench shipped``: the shipped models at each ``--batch`` size, stepped as ``FIGNetDynamics``
+does, with the network's analytic FLOPs and its GFLOP/s next to plain ``torch.mm`` on the same
+shapes (:mod:`fignet_gym.tools.bench_limits`). ``bench rollout``: ``Dynamics.rollout`` scene-steps
+per second, learned against ``mujoco.rollout``. ``bench ppo``: env steps per CPU-second of the whole
+PPO loop on MuJoCo and on FIGNet (:mod:`fignet_gym.agents.ppo.bench`; ``--repeats`` is its number
+of repetitions). ``--json PATH`` writes their figures. Timings are CPU seconds.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ import mujoco
 import numpy as np
 import torch
 
-from fignet_gym.dynamics.learned import CHUNK_NODES, PRECISIONS, batched_step
+from fignet_gym.dynamics.learned import CHUNK_NODES, batched_step
 from fignet_gym.mjcf import TossObject, push_scene_xml, toss_scene_xml
 from fignet_gym.pretrained import load_pretrained
 from fignet_gym.simulator.model import LearnedSimulator, SimulatorConfig
@@ -183,38 +183,6 @@ def time_mujoco(b: BenchScene, repeats: int) -> float:
     return _median_ms(samples)
 
 
-def main(argv: list[str] | None = None) -> None:
-    """Run the benchmark and print one table per scene."""
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_arguments(p)
-    run(p.parse_args(argv))
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    """Options of the ``bench`` command."""
-    p.add_argument("--repeats", type=int, default=20, help="timed repetitions (median reported)")
-    p.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default)")
-    p.add_argument("--batch", type=int, nargs="*", default=[1, 16], help="scene batch sizes")
-    p.add_argument("--dtype", choices=sorted(PRECISIONS), default="float32",
-                   help="network precision at inference (LearnedSimulator.inference_dtype)")
-    p.add_argument("--shipped", action="store_true",
-                   help="the shipped push/toss models at --batch sizes: FLOPs, GFLOP/s against the "
-                        "machine's matmul rate on the same shapes (skips the untrained configs)")
-    p.add_argument("--rollout", action="store_true",
-                   help="scene-steps/s of Dynamics.rollout (learned vs mujoco.rollout) at "
-                        "--rollout-batch over --rollout-steps steps")
-    p.add_argument("--rollout-batch", type=int, nargs="*", default=[1, 64, 256, 1024])
-    p.add_argument("--rollout-steps", type=int, default=25)
-    p.add_argument("--ppo", action="store_true",
-                   help="env steps per CPU-second of the PPO loop (rollouts and updates) on "
-                        "MuJoCo and on FIGNet in float32 and bfloat16")
-    p.add_argument("--ppo-env", default="fignet_gym/Push-v2", help="with --ppo: the env id")
-    p.add_argument("--ppo-setting", type=int, nargs=4, default=[256, 32, 2048, 5],
-                   metavar=("ENVS", "N_STEPS", "BATCH", "EPOCHS"),
-                   help="with --ppo: sub-environments, steps per update, minibatch, epochs")
-    p.add_argument("--json", metavar="PATH", help="write every figure to this JSON file")
-
-
 def shipped_table(args: argparse.Namespace, dtype: torch.dtype, scenes: list[BenchScene]
                   ) -> list[dict[str, Any]]:
     """Per-scene cost of batched steps of the shipped models, with FLOPs and the matmul limit."""
@@ -286,36 +254,53 @@ def rollout_table(args: argparse.Namespace, scenes: list[BenchScene]) -> dict[st
     return out
 
 
-def run(args: argparse.Namespace) -> None:
-    """Benchmark paper-size and CPU-size models on the push and toss scenes."""
+def _report_header(args: argparse.Namespace) -> dict[str, Any]:
     if args.threads:
         torch.set_num_threads(args.threads)
-    if args.ppo:
-        # deferred: stable-baselines3 and TensorBoard; `fignet-gym --help` imports this module
-        from fignet_gym.agents.ppo.bench import ppo_throughput_table
+    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, device cpu, network "
+          f"in {args.dtype}; mujoco {mujoco.__version__}; cuda available: "
+          f"{torch.cuda.is_available()} (not benchmarked)")
+    return {"torch": torch.__version__, "threads": torch.get_num_threads(), "device": "cpu",
+            "dtype": args.dtype}
 
-        table, rows = ppo_throughput_table(args.ppo_env, *args.ppo_setting, repeats=args.repeats)
-        print(table)
-        if args.json:
-            Path(args.json).write_text(json.dumps({"ppo": rows}, indent=1))
-            print(f"wrote {args.json}")
-        return
-    if args.shipped or args.rollout:
-        dtype = getattr(torch, args.dtype)
-        print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, device cpu, network "
-              f"in {args.dtype}; mujoco {mujoco.__version__}; cuda available: "
-              f"{torch.cuda.is_available()} (not benchmarked)")
-        scenes = [push_bench_scene(), toss_bench_scene()]
-        report: dict[str, Any] = {"torch": torch.__version__, "threads": torch.get_num_threads(),
-                                  "device": "cpu", "dtype": args.dtype}
-        if args.shipped:
-            report["shipped"] = shipped_table(args, dtype, scenes)
-        if args.rollout:
-            report["rollout"] = rollout_table(args, scenes)
-        if args.json:
-            Path(args.json).write_text(json.dumps(report, indent=1))
-            print(f"wrote {args.json}")
-        return
+
+def _write_json(path: str | None, report: dict[str, Any]) -> None:
+    if path:
+        Path(path).write_text(json.dumps(report, indent=1))
+        print(f"wrote {path}")
+
+
+def run_ppo(args: argparse.Namespace) -> None:
+    """``bench ppo``: env steps per CPU-second of the PPO loop on MuJoCo and on FIGNet."""
+    # deferred: stable-baselines3 and TensorBoard; `fignet-gym --help` imports this module
+    from fignet_gym.agents.ppo.bench import ppo_throughput_table
+
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    table, rows = ppo_throughput_table(args.ppo_env, *args.ppo_setting, repeats=args.repeats)
+    print(table)
+    _write_json(args.json, {"ppo": rows})
+
+
+def run_shipped(args: argparse.Namespace) -> None:
+    """``bench shipped``: the shipped models' batched step against the machine's matmul rate."""
+    report = _report_header(args)
+    report["shipped"] = shipped_table(args, getattr(torch, args.dtype),
+                                      [push_bench_scene(), toss_bench_scene()])
+    _write_json(args.json, report)
+
+
+def run_rollout(args: argparse.Namespace) -> None:
+    """``bench rollout``: ``Dynamics.rollout`` scene-steps per second, learned vs ``mujoco.rollout``."""
+    report = _report_header(args)
+    report["rollout"] = rollout_table(args, [push_bench_scene(), toss_bench_scene()])
+    _write_json(args.json, report)
+
+
+def run_step(args: argparse.Namespace) -> None:
+    """``bench step``: paper-size and CPU-size models against MuJoCo on the push and toss scenes."""
+    if args.threads:
+        torch.set_num_threads(args.threads)
     configs = {
         "paper (latent 128, 10 MP, mesh edges)": dict(latent_size=128, message_passing_steps=10),
         "cpu (latent 64, 5 MP, no mesh edges)": dict(latent_size=64, message_passing_steps=5,
@@ -324,6 +309,7 @@ def run(args: argparse.Namespace) -> None:
     dtype = getattr(torch, args.dtype)
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, network in {args.dtype}; "
           f"mujoco {mujoco.__version__}")
+    rows: list[dict[str, Any]] = []
     for b in (push_bench_scene(), toss_bench_scene()):
         mj = time_mujoco(b, args.repeats * 5)
         print(f"\n== {b.name}: {b.scene.num_objects} objects, {b.scene.num_nodes} nodes, "
@@ -338,13 +324,13 @@ def run(args: argparse.Namespace) -> None:
                 r = time_learned_step(sim, b, args.repeats, batch)
                 per = r["total"] / batch
                 share = (r["collision"] + r["graph"]) / r["total"]
+                rows.append({"scene": b.name, "model": label, "batch": batch, "mujoco_ms": mj,
+                             "x_mujoco": per / mj, **r})
                 print(f"{label:40s} {batch:3d} {r['total']:8.2f} {r['collision']:8.2f} "
                       f"{r['graph']:7.2f} {r['network']:8.2f} {r['shape_match']:7.2f} "
                       f"{r['face_edges']:8.0f} {per / mj:9.1f} {share:10.0%}")
     print("\nms are medians per step (for B > 1: for all B scenes at once); 'shape' is integration and "
           "shape matching; 'x MuJoCo' is the per-scene learned step over MuJoCo's time for the same "
           "simulated time.")
+    _write_json(args.json, {"step": rows})
 
-
-if __name__ == "__main__":
-    main()

@@ -1,6 +1,6 @@
 """Micro-benchmark of :func:`fignet_gym.simulator.collision.find_face_contacts` on two typical scenes.
 
-``fignet-gym bench-collision [--radii 0.005 0.01 0.02] [--repeats 100] [--threads 1]``
+``fignet-gym bench collision [--radii 0.005 0.01 0.02] [--repeats 100] [--threads 1]``
 
 * ``pile``: 6 objects of 60 nodes (116 faces) each, in a 3 x 2 block resting on a 2-triangle
   floor, each touching (1 mm overlap) its neighbours: 8 cm objects, so ``d_c = 0.01`` is 12 %;
@@ -71,14 +71,8 @@ def _time(fn, repeats: int) -> tuple[float, float]:
     return statistics.median(wall), statistics.median(cpu)
 
 
-def main(argv: list[str] | None = None) -> None:
-    """``fignet-gym bench-collision``: face-contact detection timings at each radius."""
-    parser = argparse.ArgumentParser(prog="fignet-gym bench-collision",
-                                     description=__doc__.splitlines()[0])
-    parser.add_argument("--radii", type=float, nargs="+", default=[0.005, 0.01, 0.02])
-    parser.add_argument("--repeats", type=int, default=100)
-    parser.add_argument("--threads", type=int, default=0, help="torch threads (0: default)")
-    args = parser.parse_args(argv)
+def run(args: argparse.Namespace) -> None:
+    """``fignet-gym bench collision``: face-contact detection timings at each radius."""
     if args.threads:
         torch.set_num_threads(args.threads)
     rng = np.random.default_rng(0)
@@ -90,15 +84,12 @@ def main(argv: list[str] | None = None) -> None:
     for name, scene, pos in cases:
         pairs = scene.collision_pairs
         for radius in args.radii:
-            def run(scene=scene, pos=pos, pairs=pairs, radius=radius):
+            def detect(scene=scene, pos=pos, pairs=pairs, radius=radius):
                 return find_face_contacts(pos, scene.faces, scene.face_object, pairs, radius)
 
-            contacts = run()
-            wall, cpu = _time(run, args.repeats)
+            contacts = detect()
+            wall, cpu = _time(detect, args.repeats)
             print(f"{name:9s} ({scene.faces.shape[0]:5d} faces, {pairs.shape[0]:3d} object pairs) "
                   f"d_c {radius:5.3f}: {contacts.num_contacts:6d} contacts, "
                   f"wall {wall * 1e3:6.2f} ms, cpu {cpu * 1e3:6.2f} ms")
 
-
-if __name__ == "__main__":
-    main()

@@ -1,6 +1,6 @@
 """Benchmark of the Push and Toss environments with MuJoCo and learned dynamics.
 
-``fignet-gym bench-envs [--envs push toss] [--nums 1 16 64] [--seconds 3] [--threads 1]``
+``fignet-gym bench envs [--envs push toss] [--nums 1 16 64] [--seconds 3] [--threads 1]``
 
 For each environment and dynamics it reports environment steps per second of a single environment
 (``gym.make``) and of the batched vector environment at each ``N`` (``gym.make_vec(...,
@@ -134,29 +134,8 @@ def bench_batched_step(
     return out
 
 
-def main(argv: list[str] | None = None) -> dict[str, Any]:
-    """``fignet-gym bench-envs``: env steps per second, single and vectorised; the rows."""
-    p = argparse.ArgumentParser(prog="fignet-gym bench-envs", description=__doc__.split("\n\n")[0])
-    p.add_argument("--envs", nargs="+", default=["push", "toss"], choices=list(ENV_IDS))
-    p.add_argument(
-        "--dynamics", nargs="+", default=["mujoco", "fignet"], choices=["mujoco", "fignet"]
-    )
-    p.add_argument("--nums", nargs="+", type=int, default=[1, 16, 64], help="vector sizes N")
-    p.add_argument("--seconds", type=float, default=3.0, help="time budget per measurement")
-    p.add_argument(
-        "--threads",
-        type=int,
-        default=1,
-        help="torch intra-op threads (1 is fastest on 2 shared cores: see the report)",
-    )
-    p.add_argument(
-        "--checkpoint-push", help="learned push checkpoint (default: pretrained or untrained)"
-    )
-    p.add_argument(
-        "--checkpoint-toss", help="learned toss checkpoint (default: pretrained or untrained)"
-    )
-    p.add_argument("--json", help="also write the results here")
-    args = p.parse_args(argv)
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    """``fignet-gym bench envs``: env steps per second, single and vectorised; the rows."""
     torch.set_num_threads(args.threads)
 
     rows: list[Row] = []
@@ -220,6 +199,3 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             json.dump(result, f, indent=1)
     return result
 
-
-if __name__ == "__main__":
-    main()

@@ -1,6 +1,6 @@
 """How far the learned step is from the machine's own limit, and rollout throughput as users meet it.
 
-Used by ``fignet-gym bench`` (``--shipped``, ``--rollout``):
+Used by ``fignet-gym bench shipped`` and ``bench rollout``:
 
 * :func:`network_flops` counts the graph network's multiply-adds analytically, block by block (each
   MLP's matmuls over the rows it runs on, with the first-layer route each edge type takes);

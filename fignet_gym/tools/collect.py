@@ -33,7 +33,6 @@ import torch
 from tqdm import tqdm
 
 from fignet_gym.atomic import output_lock
-from fignet_gym.data.cli import int_at_least
 from fignet_gym.data.format import Trajectory, TrajectoryWriter
 from fignet_gym.simulator.scene import Scene
 from fignet_gym.tools.plan import parse_env_kwargs, planning_agent, unknown_env
@@ -50,28 +49,6 @@ _MODEL_FIELDS = ("body_mass", "body_inertia", "geom_friction", "geom_solref", "g
 
 class CollectError(ValueError):
     """A user error in the ``collect`` arguments (reported as one ``error:`` line)."""
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    """The ``collect`` sub-command's arguments."""
-    p.add_argument("--env", default="fignet_gym/Push-v2", help="environment id (a push env)")
-    p.add_argument("--planner", default="cem", choices=PLANNERS)
-    p.add_argument("--dynamics", default="mujoco", choices=["mujoco", "fignet"],
-                   help="the planner's model (the episodes are always acted in MuJoCo)")
-    p.add_argument("--checkpoint", help="fignet: checkpoint path or pretrained name")
-    p.add_argument("--episodes", type=int_at_least(1), default=100)
-    p.add_argument("--seed", type=int_at_least(0), default=100000,
-                   help="episode k is reset with seed + k (keep clear of benchmark seeds)")
-    p.add_argument("--action-noise", type=float, default=0.0,
-                   help="std of Gaussian noise added to each planned action (action units)")
-    p.add_argument("--epsilon", type=float, default=0.0,
-                   help="probability of a uniformly random action instead of the plan's")
-    p.add_argument("--env-kwargs", default="{}", metavar="JSON",
-                   help="extra env arguments as a JSON object, e.g. '{\"goal_distance\": 0.02, "
-                   "\"goal_yaw\": 0.8}' (over the registered ones; dynamics is always mujoco)")
-    p.add_argument("--out", required=True, help="trajectory file (.h5) to write")
-    p.add_argument("--force", action="store_true", help="replace an existing --out")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def check_arguments(args: argparse.Namespace) -> None:

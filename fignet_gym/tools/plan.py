@@ -26,7 +26,6 @@ from typing import Any
 import numpy as np
 
 from fignet_gym.atomic import output_lock, write_text
-from fignet_gym.data.cli import int_at_least
 from fignet_gym.dynamics import DYNAMICS_LABELS, MujocoDynamics, make_dynamics
 
 BASELINES = ("idle", "random")
@@ -42,36 +41,6 @@ PARTIAL_VIDEO = ".partial.mp4"
 
 class PlanError(ValueError):
     """A user error in the ``plan`` arguments (reported as one ``error:`` line)."""
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    """The ``plan`` sub-command's arguments."""
-    p.add_argument("--env", default="fignet_gym/Push-v2", help="environment id")
-    p.add_argument("--dynamics", default="mujoco", choices=["mujoco", "fignet"],
-                   help="the planner's model")
-    p.add_argument("--checkpoint", help="fignet: checkpoint path or pretrained name (default: "
-                   "the shipped simulator of the env's scene)")
-    p.add_argument("--planner", default="cem", choices=["cem", "mppi", *BASELINES])
-    p.add_argument("--act-dynamics", default="mujoco", choices=["mujoco", "fignet"],
-                   help="what the environment acts with")
-    p.add_argument("--episodes", type=int_at_least(1), default=10)
-    p.add_argument("--seed", type=int_at_least(0), default=0, help="episode k is reset with seed + k")
-    p.add_argument("--out", required=True, help="folder for summary.json, episodes.jsonl, videos")
-    p.add_argument("--videos", type=int_at_least(0), default=0,
-                   help="side-by-side videos of the first K")
-    p.add_argument("--resume", action="store_true", help="skip episodes already in OUT (the "
-                   "settings must be the run's: env, planner, dynamics, checkpoint, budget, seed, "
-                   "MuJoCo and torch versions)")
-    p.add_argument("--force", action="store_true", help="replace a run already in OUT")
-    p.add_argument("--horizon", type=int, help="override the preset planning horizon")
-    p.add_argument("--population", type=int, help="override the preset candidates per iteration")
-    p.add_argument("--iterations", type=int, help="override the preset iterations")
-    p.add_argument("--replan-every", type=int, help="override the preset re-planning period")
-    p.add_argument("--env-kwargs", default="{}", metavar="JSON",
-                   help="env arguments as a JSON object, e.g. ScenePush-v0's "
-                        "'{\"mjcf\": \"my_scene.xml\", \"object\": \"crate\", \"pusher\": \"finger\"}'")
-    p.add_argument("--threads", type=int_at_least(1), default=1,
-                   help="torch and MuJoCo rollout threads")
 
 
 def parse_env_kwargs(text: str, fixed: Sequence[str], why: str,

@@ -5,11 +5,11 @@ presets, and the ``{"simulator": {...}, "training": {...}}`` run config they and
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
+from fignet_gym.checks import Range, check_settings
 from fignet_gym.simulator.model import TrainingNoise
 
 
@@ -101,21 +101,7 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         # Zero or negative counts would divide by zero or never validate; say what is allowed.
-        for f in fields(self):
-            value, lo = getattr(self, f.name), _TRAIN_MINIMUM.get(f.name, 0)
-            if f.type == "bool":
-                if not isinstance(value, bool):
-                    raise ValueError(f"training.{f.name} must be true or false, got {value!r}")
-            elif f.type == "int":
-                if isinstance(value, bool) or not isinstance(value, int) or value < lo:
-                    raise ValueError(f"training.{f.name} must be an integer >= {lo}, got {value!r}")
-            elif (isinstance(value, bool) or not isinstance(value, (int, float))
-                  or not math.isfinite(value) or value < lo
-                  or (f.name in _TRAIN_POSITIVE and value <= 0)):
-                rule = "> 0" if f.name in _TRAIN_POSITIVE else f">= {lo}"
-                raise ValueError(f"training.{f.name} must be a finite number {rule}, got {value!r}")
-        if self.ema_decay >= 1:
-            raise ValueError(f"training.ema_decay must be below 1, got {self.ema_decay!r}")
+        check_settings(self, TRAIN_RANGES, "training.")
 
     def noise(self, std: float | None = None) -> TrainingNoise:
         """The input noise of this config, with ``std`` (m) in place of ``noise_std`` if given
@@ -131,11 +117,30 @@ class TrainConfig:
         return TrainConfig(**d)
 
 
-#: Smallest allowed value of the integer training settings (others: 0).
-_TRAIN_MINIMUM = {"steps": 1, "batch_size": 1, "valid_every": 1, "valid_trajectories": 1,
-                  "valid_horizon": 1, "checkpoint_every": 1}
-#: Float training settings that must be strictly positive.
-_TRAIN_POSITIVE = {"lr", "lr_final"}
+#: Integer training settings that must be at least 1 (the other integers: at least 0).
+_TRAIN_COUNTS = ("steps", "batch_size", "valid_every", "valid_trajectories", "valid_horizon",
+                 "checkpoint_every")
+#: Number settings with their own range (the other numbers: finite and at least 0).
+_TRAIN_NUMBERS = {"lr": Range("float", low=0, low_open=True),
+                  "lr_final": Range("float", low=0, low_open=True),
+                  "ema_decay": Range("float", 0, 1, high_open=True)}
+
+
+def _train_ranges() -> dict[str, Range]:
+    """``field -> allowed values`` of every :class:`TrainConfig` field, from its type."""
+    table: dict[str, Range] = {}
+    for f in fields(TrainConfig):
+        if f.type == "bool":
+            table[f.name] = Range("bool")
+        elif f.type == "int":
+            table[f.name] = Range("int", low=1 if f.name in _TRAIN_COUNTS else 0)
+        else:
+            table[f.name] = _TRAIN_NUMBERS.get(f.name, Range("float", low=0))
+    return table
+
+
+#: ``field -> allowed values`` of every :class:`TrainConfig` field (messages ``training.<field>``).
+TRAIN_RANGES: dict[str, Range] = _train_ranges()
 
 
 # Latent 64, 5 message-passing steps, no mesh-mesh edges (FIGNet*): cheaper per graph than the

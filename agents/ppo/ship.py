@@ -1,4 +1,4 @@
-"""``fignet-gym ppo-ship``: a finished PPO run becomes a shipped policy with a generated card.
+"""Shipping a PPO run (``fignet-gym ppo-ship``): a finished run becomes a named policy with a card.
 
 The run's ``policy.zip``, ``vecnormalize.pkl``, ``config.json``, ``final_eval.json`` and
 ``eval.csv`` are copied to ``<dest>/<name>/`` (default: the package's shipped policies, which
@@ -10,13 +10,11 @@ better run is the same command with ``--force``; no number in the card is typed 
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import math
 import re
 import shutil
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -25,12 +23,12 @@ from scipy.stats import binomtest
 
 from fignet_gym.agents.ppo.config import DYNAMICS, RunConfig
 from fignet_gym.agents.ppo.eval import EVAL_SEED
+from fignet_gym.agents.ppo.options import command_line
 from fignet_gym.agents.ppo.policy import load_run_policy
-from fignet_gym.agents.ppo.rundir import CONFIG, FINAL_EVAL, NORMALIZER, POLICY, RunError
+from fignet_gym.agents.ppo.rundir import CONFIG, FINAL_EVAL, NORMALIZER, POLICY
 from fignet_gym.agents.ppo.shipped import policies_dir
 from fignet_gym.agents.ppo.table import read_curves, read_final_eval
 from fignet_gym.dynamics import DYNAMICS_LABELS
-from fignet_gym.tools.ppo import OPTIONS, config_from_args
 
 #: A shipped name: what ``load_policy`` takes and the folder's name.
 NAME = re.compile(r"^[a-z0-9][a-z0-9._-]*$")
@@ -53,55 +51,6 @@ def wilson_interval(successes: int, n: int) -> tuple[float, float]:
 def _flat(config: dict[str, Any]) -> dict[str, Any]:
     """A run config's JSON with its ``ppo`` settings lifted to the top level."""
     return {**{k: v for k, v in config.items() if k != "ppo"}, **config["ppo"]}
-
-
-def _value_text(value: Any) -> str:
-    return ",".join(str(v) for v in value) if isinstance(value, (list, tuple)) else str(value)
-
-
-def _rerun(values: dict[str, Any]) -> dict[str, Any] | None:
-    """The config ``fignet-gym ppo`` builds from these parsed values (``None``: one it reads is
-    missing, i.e. an option the command always has)."""
-    try:
-        return config_from_args(argparse.Namespace(**values)).to_json()
-    except AttributeError:
-        return None
-
-
-def ppo_command(cfg: RunConfig, out: str) -> tuple[list[str], list[str]]:
-    """``fignet-gym ppo`` arguments that rerun ``cfg`` into ``out``, and the settings of ``cfg``
-    no option sets (they differ from what the command would run).
-
-    An option goes into the command when the command reads it unconditionally or when leaving
-    it out would change the config (so settings at the command's fallbacks stay implicit).
-    """
-    flat = _flat(cfg.to_json())
-    values: dict[str, Any] = {"env": cfg.env_id, "simulator": cfg.simulator,
-                              "no_normalize": not (cfg.norm_obs or cfg.norm_reward)}
-    options = {"env": "--env", "simulator": "--simulator", "no_normalize": "--no-normalize"}
-    for field, option in OPTIONS.items():
-        if field in flat:
-            dest = option.lstrip("-").replace("-", "_")  # argparse's rule
-            value = flat[field]
-            values[dest] = _value_text(value) if isinstance(value, (list, tuple)) else value
-            options[dest] = option
-    try:
-        full = _rerun(values)
-    except ValueError as err:
-        return [], [f"(no command reruns it: {err})"]
-    if full is None:
-        return [], ["(the command could not be rebuilt)"]
-    args: list[str] = []
-    for dest, option in options.items():
-        if _rerun({k: v for k, v in values.items() if k != dest}) == full:
-            continue  # the command's fallback is this value
-        value = values[dest]
-        if isinstance(value, bool):
-            args += [option] if value else []
-        elif value is not None:
-            args += [option, _value_text(value)]
-    again = _flat(full)
-    return [*args, "--out", out], [k for k in flat if again.get(k) != flat[k]]
 
 
 def check_run(run: Path) -> tuple[RunConfig, dict[str, Any], tuple[list[int], dict[str, list[float]]] | None]:
@@ -198,7 +147,7 @@ def policy_card(name: str, run: Path, cfg: RunConfig, final: dict[str, Any],
         "## Recipe",
         "",
     ]
-    args, unset = ppo_command(cfg, f"runs/{name}")
+    args, unset = command_line(cfg, f"runs/{name}")
     lines += ["```bash", "fignet-gym ppo " + " ".join(args), "```", ""]
     if unset:
         lines += [f"Settings no option of `fignet-gym ppo` sets (from `{CONFIG}`): "
@@ -263,15 +212,3 @@ def ship_policy(run: str | Path, name: str, dest: str | Path | None = None,
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return final_dir
-
-
-def ppo_ship_command(args: argparse.Namespace) -> int:
-    """``fignet-gym ppo-ship RUN --name NAME [--dest DIR] [--force]``."""
-    try:
-        folder = ship_policy(args.run, args.name, args.dest, args.force)
-    except (ShipError, RunError, ValueError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    size = sum(p.stat().st_size for p in folder.iterdir())
-    print(f"shipped {folder} ({size / 1e6:.1f} MB); card {folder / (args.name + '.md')}")
-    return 0

@@ -1,10 +1,11 @@
 """Data subcommands of ``fignet-gym``: ``generate``, ``show``, ``import-mit``, ``check-mit``,
-``import-movi``, ``import-contactnets``, ``split``.
+``import-movi``, ``import-contactnets``, ``mit-standin``, ``split``.
 
 :func:`register` adds them to the main parser's subparsers; each sets ``func`` to a callable that
 takes the parsed arguments and returns an exit code. Known bad input (malformed files, unknown
-shapes) prints one ``error:`` line naming the file, trajectory and field, never a traceback.
-Also runnable alone: ``python -m fignet_gym.data.cli <subcommand> ...``.
+shapes, a trajectory index beyond the file) raises the library's ``ValueError`` subclasses naming
+the file, trajectory and field, which :func:`fignet_gym.cli.errors.run_command` prints as one
+``error:`` line.
 """
 
 from __future__ import annotations
@@ -12,15 +13,14 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import math
 import os
-import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 
 from fignet_gym.atomic import output_lock, write_text
-from fignet_gym.data.format import TrajectoryFile, TrajectoryFormatError
+from fignet_gym.cli.options import int_at_least, nonnegative_float, positive_float
+from fignet_gym.data.format import TrajectoryFile
 from fignet_gym.data.generate import KINDS, TossConfig, default_config, generate
 from fignet_gym.data.importers import import_movi, load_mesh_map
 from fignet_gym.data.mit import (
@@ -40,56 +40,6 @@ from fignet_gym.data.tracked import import_contactnets
 from fignet_gym.data.viewer import Camera, render_trajectory_record
 from fignet_gym.mjcf.assets import CONES, DEFAULT_CONE
 from fignet_gym.simulator.scene import MeshOptions
-
-
-def int_at_least(low: int) -> Callable[[str], int]:
-    """argparse ``type``: an integer ``>= low`` (argparse prints the message and exits 2)."""
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {text!r}") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {value}")
-        return value
-    parse.__name__ = f"integer >= {low}"
-    return parse
-
-
-def _finite_float(text: str, strict: bool) -> float:
-    """``text`` as a finite number ``> 0`` (``strict``) or ``>= 0``; ``ArgumentTypeError`` else."""
-    bound = "> 0" if strict else ">= 0"
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number {bound}, got {text!r}") from None
-    if not (math.isfinite(value) and (value > 0 if strict else value >= 0)):
-        raise argparse.ArgumentTypeError(f"must be a finite number {bound}, got {text}")
-    return value
-
-
-def positive_float(text: str) -> float:
-    """argparse ``type``: a finite number ``> 0``."""
-    return _finite_float(text, strict=True)
-
-
-def nonnegative_float(text: str) -> float:
-    """argparse ``type``: a finite number ``>= 0``."""
-    return _finite_float(text, strict=False)
-
-_KNOWN_ERRORS: tuple[type[BaseException], ...] = (TrajectoryFormatError, FileNotFoundError,
-                                                  FileExistsError, ValueError, IndexError)
-
-
-def _guarded(fn: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
-    def run(args: argparse.Namespace) -> int:
-        try:
-            return fn(args)
-        except _KNOWN_ERRORS as err:  # DataImportError and GenerationError are among these
-            print(f"error: {err}", file=sys.stderr)
-            return 2  # as cli.run_command: the one exit code for a user error
-    run.__doc__ = fn.__doc__
-    return run
 
 
 def _refuse_overwrite(out: str | os.PathLike, force: bool) -> None:
@@ -329,7 +279,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     help="free bodies' start: heading turned by up to this, rad (default pi)")
     sc.add_argument("--segments", type=int_at_least(1), default=None,
                     help="straight pieces per stroke (default 1)")
-    g.set_defaults(func=_guarded(_generate))
+    g.set_defaults(func=_generate)
 
     s = subparsers.add_parser("show", help="render a stored trajectory to MP4 or GIF")
     s.add_argument("file")
@@ -341,7 +291,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("--azimuth", type=float, default=90.0)
     s.add_argument("--elevation", type=float, default=-45.0)
     s.add_argument("--distance", type=float, default=None, help="default: fitted to the motion")
-    s.set_defaults(func=_guarded(_show))
+    s.set_defaults(func=_show)
 
     m = subparsers.add_parser(
         "import-mit", help="import MIT Pushing raw or pdproc files (windows from first contact)",
@@ -366,7 +316,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     m.add_argument("--report", default=None, help="also write the check as JSON here")
     m.add_argument("--force", action="store_true", help="replace OUT if it exists (default: refuse)")
     m.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
-    m.set_defaults(func=_guarded(_import_mit))
+    m.set_defaults(func=_import_mit)
 
     ck = subparsers.add_parser(
         "check-mit", help="check MIT pushes against the real outlines (tip distance in contact)",
@@ -378,7 +328,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _mit_selection_args(ck)
     ck.add_argument("--json", default=None, help="write the check as JSON here")
     ck.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
-    ck.set_defaults(func=_guarded(_check_mit))
+    ck.set_defaults(func=_check_mit)
 
     v = subparsers.add_parser("import-movi", help="import Kubric MOVi metadata.json records")
     v.add_argument("paths", nargs="+", help="metadata.json files or directories")
@@ -390,7 +340,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     v.add_argument("--floor-half-size", type=positive_float, default=20.0)
     v.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
     v.add_argument("--force", action="store_true", help="replace OUT if it exists (default: refuse)")
-    v.set_defaults(func=_guarded(_import_movi))
+    v.set_defaults(func=_import_movi)
 
     c = subparsers.add_parser("import-contactnets",
                               help="import the DAIRLab ContactNets real cube tosses")
@@ -402,7 +352,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--floor-half-size", type=positive_float, default=2.0, help="floor plane half-size (m)")
     c.add_argument("--skip-bad", action="store_true", help="warn and skip malformed files")
     c.add_argument("--force", action="store_true", help="replace OUT if it exists (default: refuse)")
-    c.set_defaults(func=_guarded(_import_contactnets))
+    c.set_defaults(func=_import_contactnets)
 
     ms = subparsers.add_parser("mit-standin", help="stand-in MIT Pushing raw files (MuJoCo pushes "
                                "with per-push friction, tracking noise and pusher penetration)")
@@ -414,7 +364,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     help="how much thinner the simulated tip is than the imported scene's (m)")
     ms.add_argument("--force", action="store_true",
                     help="replace the stand-in pushes already in OUT (default: refuse)")
-    ms.set_defaults(func=_guarded(_mit_standin))
+    ms.set_defaults(func=_mit_standin)
 
     sp = subparsers.add_parser("split", help="seeded train/valid/test split of a trajectory file, by "
                                    "recording (windows sharing metadata \"file\" stay together)")
@@ -424,16 +374,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     metavar=("TRAIN", "VALID", "TEST"))
     sp.add_argument("--seed", type=int, default=0)
     sp.add_argument("--force", action="store_true", help="replace a split already in OUT")
-    sp.set_defaults(func=_guarded(_split))
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Stand-alone entry point with only the data subcommands."""
-    parser = argparse.ArgumentParser(prog="fignet-gym")
-    register(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(argv)
-    return int(args.func(args))
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+    sp.set_defaults(func=_split)
