@@ -27,8 +27,8 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 from fignet_gym.agents.ppo import RunConfig, run_ppo, transfer_table
-from fignet_gym.agents.ppo.shipped import policies_dir
 from fignet_gym.agents.ppo.ship import ship_policy
+from fignet_gym.agents.ppo.shipped import policies_dir
 
 #: The shipped policy whose recipe this example trains.
 SHIPPED = "push-ppo"
