@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from fignet_gym.pretrained import load_pretrained
-from fignet_gym.simulator.checkpoint import CHECKPOINT_FORMAT, CheckpointError, save
+from fignet_gym.simulator.checkpoint import CHECKPOINT_FORMAT, CheckpointError, CheckpointWarning, save
 from fignet_gym.simulator.checkpoint import load as load_checkpoint_file
 from fignet_gym.simulator.collision import FaceContacts
 from fignet_gym.simulator.config import SimulatorConfig
@@ -180,7 +180,8 @@ def test_checkpoint_roundtrip_and_bad_files(tmp_path, push_like_xml: str) -> Non
     blob["config"]["latent_size"] = 32
     del blob["checksum"]  # an unsealed file: the shape check (not the checksum) must refuse it
     torch.save(blob, mismatched)
-    with pytest.raises(CheckpointError, match="do not match"):
+    with pytest.warns(CheckpointWarning, match="no content checksum"), \
+            pytest.raises(CheckpointError, match="do not match"):
         load_pretrained(mismatched)
 
 
@@ -243,7 +244,8 @@ def test_last_block_has_no_dead_weights_and_extra_weights_are_refused(tmp_path, 
     del blob["checksum"]  # an unsealed file: the shape check (not the checksum) must refuse it
     blob["state_dict"]["net.extra.weight"] = torch.zeros(2)
     torch.save(blob, path)
-    with pytest.raises(CheckpointError, match="do not match"):
+    with pytest.warns(CheckpointWarning, match="no content checksum"), \
+            pytest.raises(CheckpointError, match="do not match"):
         load_pretrained(path)
 
 
