@@ -426,9 +426,9 @@ class MPPIPlanner(SamplingPlanner):
         return best_cost, diverged, cfg.iterations * cfg.population
 
 
-#: Planning budgets per scene (the benchmark's, ``docs/experiments.md``, "Planning"): Push plans 20
+#: Planning budgets per scene (the benchmark's, ``experiments/README.md``, "Planning"): Push plans 20
 #: steps (0.4 s) ahead with smooth, saturating candidates and re-plans every 2 actions (to keep the
-#: learned model's cost per action affordable on one core: docs/experiments.md, Planning,
+#: learned model's cost per action affordable on one core: experiments/README.md, Planning,
 #: "The planner"); Toss plans one release.
 PRESETS: dict[str, dict[str, Any]] = {
     "push": {"horizon": 20, "population": 20, "iterations": 2, "noise_std": 1.0,

@@ -156,7 +156,7 @@ class PushEnv(MjDynamicsEnv):
       ``push-pyramidal``, the model trained on its physics. v1 is deprecated.
 
     * v1: a task a planner with a perfect model solves (MPC with MuJoCo as its model: see
-      ``docs/experiments.md``, "Planning"). The tip starts 5 mm behind the object on the side
+      ``experiments/README.md``, "Planning"). The tip starts 5 mm behind the object on the side
       away from the goal (``tip_start="behind"``, up to 1 cm sideways), instead of anywhere
       around it: in v0 45% of episodes need more than the 50-step limit to get there. The goal
       lies 2 to 5 cm away (``goal_distance_min=0.02``: never already solved; 5 cm is the travel

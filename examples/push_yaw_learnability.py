@@ -9,7 +9,7 @@ default pyramidal cone (``generate --cone pyramidal``, the data of Push-v1) the 
 is not a function of these parameters and no learner can fit it. Its held-out R^2 against the
 number of training pushes says how hard the map is to learn from examples, independently of any
 graph network. The last column is in the push target's unit: the median yaw error over that of
-not moving (measured figures for both cones: docs/experiments.md, "Isotropic physics").
+not moving (measured figures for both cones: experiments/README.md, "Isotropic physics").
 
     pip install scikit-learn   # not a fignet_gym dependency
     python examples/push_yaw_learnability.py --train data/push_train.h5 data/push_train8k.h5 \\

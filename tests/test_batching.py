@@ -217,7 +217,7 @@ def test_rollout_steps_move_no_tensor_to_the_host(push_sim, monkeypatch) -> None
         with _no_host_transfers(monkeypatch):
             push_sim.rollout(scene.repeat(b), h, kin)
         syncs[b] = _HostGuard.syncs
-    # 5 per step, + 1 per scene for the canonical frame's cached static info: docs/experiments.md,
+    # 5 per step, + 1 per scene for the canonical frame's cached static info: experiments/README.md,
     # Issue 17, "GPU path"
     assert syncs[1] == syncs[8] <= 5 * 5 + 1, syncs
 

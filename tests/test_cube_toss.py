@@ -149,7 +149,7 @@ def test_a_long_toss_accepts_a_checkpoint_dt_stored_to_nine_digits() -> None:
 def test_fitted_mujoco_and_cube_real_land_the_cube_close_together() -> None:
     # Two independent fits of the same real tosses (CMA-ES on MuJoCo's contact parameters, the
     # learned simulator): seeded random tosses of ~0.4 m should come to rest within a few cm of
-    # each other (figures: docs/experiments.md, "Issue 14: FIGNet on real tosses").
+    # each other (figures: experiments/README.md, "Issue 14: FIGNet on real tosses").
     n = 16
     landed = {}
     for dyn in ("mujoco", "fignet"):

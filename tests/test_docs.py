@@ -13,7 +13,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 ARCHITECTURE = ROOT / "docs" / "architecture.md"
-DOCS = sorted([README, *(ROOT / "docs").glob("*.md"), *(ROOT / "fignet_gym" / "pretrained").glob("*.md")])
+DOCS = sorted([README, *(ROOT / "docs").glob("*.md"), *(ROOT / "fignet_gym" / "pretrained").glob("*.md"),
+               ROOT / "experiments" / "README.md"])
 
 FENCE = re.compile(r"^```.*?^```", re.S | re.M)
 LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
@@ -21,7 +22,7 @@ CODE_SPAN = re.compile(r"`([^`\n]+)`")
 # Repository paths written in code spans start with one of these folders (run, data and output
 # folders such as runs/ and data/ are the user's, not the repository's).
 ENV_ID = re.compile(r"-v\d+$")  # fignet_gym/Push-v2 is an environment id, not a path
-TOP = ("fignet_gym/", "docs/", "envs/", "agents/", "examples/", "scripts/", "tests/")
+TOP = ("fignet_gym/", "docs/", "envs/", "agents/", "examples/", "scripts/", "tests/", "experiments/")
 
 
 def _slug(heading: str) -> str:

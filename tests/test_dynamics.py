@@ -302,7 +302,7 @@ def test_fignet_bfloat16_precision_follows_float32() -> None:
     """The opt-in bf16 network on the shipped push model: a 0.5 s push stays within a few
     millimetres of the float32 rollout (median under 1 mm, 9 in 10 under 5 mm; the largest qpos
     coordinate, quaternions included), and is not bit-identical to it (the bf16 network did run).
-    Over 500 pushes of 5 objects (docs/experiments.md, "bfloat16"): median 0.39 mm, 90th
+    Over 500 pushes of 5 objects (experiments/README.md, "bfloat16"): median 0.39 mm, 90th
     percentile 2.1 mm, max 14 (push-pyramidal: 0.61, 2.15, 10.8); here 0.46 mm, max 13."""
     push_model = mujoco.MjModel.from_xml_string(push_scene_xml("rect1", tip_xy=(-0.055, 0.0)))
     d = mujoco.MjData(push_model)

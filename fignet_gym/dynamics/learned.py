@@ -97,7 +97,7 @@ class FIGNetDynamics(DynamicsBase):
         precision: ``"float32"``, or ``"bfloat16"`` for the network in bfloat16 (opt-in:
             on CPUs with AVX-512 BF16 or AMX 1.3-1.7x more batched scene-steps per second,
             at about 0.1 mm median divergence over a 0.5 s push and the toss model's error
-            unchanged within 2%; docs/experiments.md, Speed). ``None``: the simulator's own
+            unchanged within 2%; experiments/README.md, Speed). ``None``: the simulator's own
             ``inference_dtype`` (float32 unless set).
     """
 

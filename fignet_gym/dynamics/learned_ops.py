@@ -16,7 +16,7 @@ from fignet_gym.simulator.model import LearnedSimulator
 from fignet_gym.simulator.scene import Scene
 
 #: Nodes per learned step at most: larger batches are stepped in chunks of whole scenes. Per-scene
-#: cost is lowest around 8k to 17k nodes (docs/experiments.md, Speed); beyond, every latent
+#: cost is lowest around 8k to 17k nodes (experiments/README.md, Speed); beyond, every latent
 #: outgrows the caches and each new tensor is fresh memory to fault in.
 CHUNK_NODES = 16384
 

@@ -108,7 +108,7 @@ class TrainingExample:
 
 #: Fewest mesh nodes for which a lower ``inference_dtype`` is used: on smaller graphs (one to ~16
 #: push scenes, one to ~3 toss scenes) bf16 is slower than float32 on this repository's CPUs
-#: (docs/experiments.md, "Speed"), so they run in float32.
+#: (experiments/README.md, "Speed"), so they run in float32.
 LOW_PRECISION_MIN_NODES = 1024
 
 
@@ -132,7 +132,7 @@ class LearnedSimulator(nn.Module):
         # is not saved). torch.bfloat16 runs a bfloat16 copy of the whole network (matmuls,
         # LayerNorms, sums) on graphs of at least LOW_PRECISION_MIN_NODES nodes, 1.3-1.5x faster
         # per batched scene on CPUs with AVX-512 BF16 or AMX, at a relative error of ~1e-2 in the
-        # accelerations (docs/experiments.md, "Speed").
+        # accelerations (experiments/README.md, "Speed").
         self.inference_dtype: torch.dtype = torch.float32
         self._low_precision: tuple[tuple, nn.Module] | None = None
 

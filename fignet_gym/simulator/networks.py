@@ -35,7 +35,7 @@ from fignet_gym.simulator.graph import Graph
 #: Fewest rows a matmul is given (padded with zeros): BLAS computes narrow products with other
 #: kernels, whose rounding differs from the same rows inside a larger product, which would make a
 #: scene's result depend on its batch. How narrow depends on the CPU: 1-3 rows on an AVX-512 Xeon,
-#: up to 15 on an AMX one (docs/experiments.md, "Speed": "Batched equals single");
+#: up to 15 on an AMX one (experiments/README.md, "Speed": "Batched equals single");
 #: tests/test_batching.py checks the margin on the machine it runs on.
 MIN_ROWS = 32
 

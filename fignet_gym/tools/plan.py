@@ -75,7 +75,7 @@ def check_arguments(args: argparse.Namespace) -> None:
 def software() -> dict[str, str]:
     """Versions of the libraries whose numerics decide an episode: a planned episode is
     deterministic given its seed on one stack, but contact-rich episodes diverge between MuJoCo
-    or torch versions (docs/experiments.md, Planning), so a line is not resumed across them."""
+    or torch versions (experiments/README.md, Planning), so a line is not resumed across them."""
     import mujoco  # deferred: versions are read only when a run starts
     import torch  # deferred: fignet-gym --help loads this module's parser, torch costs seconds
 

@@ -144,7 +144,7 @@ TRAIN_RANGES: dict[str, Range] = _train_ranges()
 
 
 # Latent 64, 5 message-passing steps, no mesh-mesh edges (FIGNet*): cheaper per graph than the
-# paper's size, so a CPU budget sees more graphs (docs/experiments.md, "Speed").
+# paper's size, so a CPU budget sees more graphs (experiments/README.md, "Speed").
 _CPU_SIZE = dict(latent_size=64, message_passing_steps=5, mesh_edges=False)
 # The pusher is meshed as an octagonal prism (0.4 mm from its true 4.75 mm radius): fewer faces.
 _PUSH_SCENE = dict(_CPU_SIZE, collision_radius=0.01, scene_type="push", feature_clip=0.1,
@@ -168,7 +168,7 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
                                        valid_horizon=25)},
     # A push model from scratch: push-finetune's model with the rigid output projection, a higher
     # learning rate and plain one-step training before pushforward (from step 1500). No shipped
-    # model was trained with it (docs/experiments.md, "Pushing from scratch").
+    # model was trained with it (experiments/README.md, "Pushing from scratch").
     "push-scratch": {"simulator": dict(_PUSH_MODEL, rigid_output=True),
                      "training": dict(_PUSH_NOISE, steps=40_000, batch_size=16, lr=5e-4, lr_final=1e-5,
                                       unroll_steps=6,
@@ -192,7 +192,7 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     # pushforward after 5000 steps): the shipped model's recipe, which beat 3 steps and a
     # 5000-step schedule on validation. A cube is mirror symmetric: reflected windows gave
     # clearly better test errors with 8-32 tosses and level ones with 64-240 (each measured in
-    # docs/experiments.md, real tosses).
+    # experiments/README.md, real tosses).
     "cube-real": {"simulator": dict(_CPU_SIZE, collision_radius=0.02, scene_type="cube-real",
                                     gravity=(0.0, 0.0, -9.61), feature_clip=0.2, rigid_output=True),
                   "training": dict(steps=40_000, batch_size=16, lr=1e-3, lr_final=3e-5, unroll_steps=3,

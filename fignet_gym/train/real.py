@@ -29,7 +29,7 @@ from fignet_gym.train.trainer import Trainer
 #: a few tosses are learned (and overfitted) sooner, so small sets get fewer steps. Selection on
 #: validation picks the best checkpoint within them. Sized so that a whole ``sim2real`` sweep
 #: (8 .. all of 240 tosses, with validations and MuJoCo's fit) stays within 2 CPU hours on one
-#: core (docs/experiments.md, real tosses, "Sweep budget").
+#: core (experiments/README.md, real tosses, "Sweep budget").
 DEFAULT_STEPS: tuple[tuple[int, int], ...] = ((8, 3000), (16, 4000), (32, 5000), (64, 8000),
                                               (128, 12000), (10**9, 20000))
 #: Pushforward starts after this fraction of a run's steps (the ``cube-real`` preset's 5000 of
@@ -41,7 +41,7 @@ UNROLL_AFTER_FRACTION = 0.125
 #: 3000 steps of the sixth round's fine-tunes (whose best checkpoints were at step 1000; 10
 #: steps cost half of 20 and scored within validation noise of them). Selection still runs on
 #: validation and the warm start is validated first, so the base model stays a candidate
-#: (docs/experiments.md, real tosses: the rollout-loss fine-tunes).
+#: (experiments/README.md, real tosses: the rollout-loss fine-tunes).
 POLISH_STEPS = 1000
 POLISH_OVERRIDES: dict[str, Any] = {"training.rollout_steps": 10, "training.lr": 1e-4,
                                     "training.lr_final": 4.64e-5, "training.unroll_after": 0}

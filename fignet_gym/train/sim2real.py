@@ -70,7 +70,7 @@ FLOOR_CLEARANCE = 0.01
 PRETRAIN_STEPS = 8000
 #: ``--pretrain``: how each size fine-tunes the pretrained model: a low learning rate and
 #: pushforward from the first step (on 8 real tosses, 1e-4 or plain one-step training first lost
-#: the pretraining's rollouts within 250 steps; docs/experiments.md, real data,
+#: the pretraining's rollouts within 250 steps; experiments/README.md, real data,
 #: "Pretraining on a fitted MuJoCo").
 #: ``--pretrain`` on pushes: optimiser steps on the synthetic pushes (from ``--init``).
 PUSH_PRETRAIN_STEPS = 2000

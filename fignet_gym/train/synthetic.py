@@ -5,7 +5,7 @@ scores 12.0 mm at frame 50 on validation; fitted on 64, 11.6 mm), yet are far to
 FIGNet from scratch. So
 ``fignet-gym sim2real --pretrain N`` fits MuJoCo on the real tosses a model may use, re-simulates
 ``N`` tosses started from randomised versions of their release states in the fitted MuJoCo,
-pretrains FIGNet on those and fine-tunes it on the real ones (docs/experiments.md, real tosses,
+pretrains FIGNet on those and fine-tunes it on the real ones (experiments/README.md, real tosses,
 "Pretraining on a fitted MuJoCo").
 
 A synthetic toss keeps its source's scene (MJCF, meshes, properties) and length. Its first three
