@@ -13,6 +13,7 @@ from fignet_gym import check_same_install
 
 check_same_install(__file__, "agents")  # before anything else of this copy is imported
 
+from fignet_gym.agents import ppo  # its names load stable-baselines3 only when first used
 from fignet_gym.agents.baselines import IdleAgent, RandomAgent
 from fignet_gym.agents.episode import run_episode
 from fignet_gym.agents.planners import (
@@ -70,16 +71,9 @@ __all__ = [
     "transfer_table",
 ]
 
-#: Names re-exported from :mod:`fignet_gym.agents.ppo`, imported on first use (PEP 562).
-_PPO_NAMES = ("EVAL_KEYS", "NormalizedPolicy", "PPOConfig", "RunConfig", "available_policies",
-              "evaluate_policy_on", "load_policy", "load_run_policy", "run_ppo", "transfer_table")
-
-
 def __getattr__(name: str) -> object:
-    if name in _PPO_NAMES:
-        # deferred: the PPO stack (stable-baselines3, TensorBoard) only for those who use it (PEP 562)
-        import fignet_gym.agents.ppo as ppo
-
+    # PPO names resolve through the subpackage's own lazy table (PEP 562): the PPO stack
+    # (stable-baselines3, TensorBoard) loads only for those who use it.
+    if name in ppo.__all__:
         return getattr(ppo, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-

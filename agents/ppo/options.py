@@ -89,9 +89,15 @@ OPTIONS: tuple[Option, ...] = (
 )
 
 
+def _field(setting: str) -> tuple[bool, str]:
+    """``(whether a PPOConfig field, its name)`` of a dotted setting (``"ppo.gamma"``)."""
+    return setting.startswith("ppo."), setting.removeprefix("ppo.")
+
+
 def default(setting: str) -> Any:
     """The config's default of ``setting`` (dotted: ``"ppo.gamma"``)."""
-    cls, name = (PPOConfig, setting[4:]) if setting.startswith("ppo.") else (RunConfig, setting)
+    in_ppo, name = _field(setting)
+    cls = PPOConfig if in_ppo else RunConfig
     f = next(f for f in fields(cls) if f.name == name)
     return f.default_factory() if f.default is MISSING else f.default  # type: ignore[misc]
 
@@ -124,8 +130,8 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     for o in OPTIONS:
         value = getattr(args, o.dest)
         for setting in o.settings:
-            into, name = (ppo, setting[4:]) if setting.startswith("ppo.") else (run, setting)
-            into[name] = (not value) if o.invert else value
+            in_ppo, name = _field(setting)
+            (ppo if in_ppo else run)[name] = (not value) if o.invert else value
     flag = {s: o.flag for o in OPTIONS for s in o.settings}
     try:
         return RunConfig(**run, ppo=PPOConfig(**ppo))

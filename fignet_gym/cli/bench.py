@@ -5,6 +5,9 @@ in one run (learned against MuJoCo on the same scene, batched against single) an
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
+
+import torch
 
 from fignet_gym.cli.options import int_at_least, positive_float
 from fignet_gym.dynamics.learned import PRECISIONS
@@ -14,16 +17,18 @@ from fignet_gym.tools import bench, bench_collision
 BENCH_ENVS = ("push", "toss")
 
 
-def _envs(args: argparse.Namespace) -> int:
+def _envs(args: argparse.Namespace) -> None:
     from fignet_gym.tools.bench_envs import run  # deferred: Gymnasium's envs; `--help` stays fast
 
     run(args)
-    return 0
 
 
-def _call(run: object) -> object:
+def _call(run: Callable[[argparse.Namespace], object]) -> Callable[[argparse.Namespace], int]:
+    """The command of a benchmark: ``--threads`` set once here for every one of them."""
     def command(args: argparse.Namespace) -> int:
-        run(args)  # type: ignore[operator]
+        if args.threads:
+            torch.set_num_threads(args.threads)
+        run(args)
         return 0
     return command
 
@@ -85,7 +90,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--checkpoint-push", help="learned push checkpoint (default: pretrained or untrained)")
     p.add_argument("--checkpoint-toss", help="learned toss checkpoint (default: pretrained or untrained)")
     _common(p, threads_default=1)
-    p.set_defaults(func=_envs)
+    p.set_defaults(func=_call(_envs))
 
     p = kinds.add_parser("collision", help="face-contact detection timings at several radii")
     p.add_argument("--radii", type=positive_float, nargs="+", default=[0.005, 0.01, 0.02])

@@ -255,8 +255,6 @@ def rollout_table(args: argparse.Namespace, scenes: list[BenchScene]) -> dict[st
 
 
 def _report_header(args: argparse.Namespace) -> dict[str, Any]:
-    if args.threads:
-        torch.set_num_threads(args.threads)
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, device cpu, network "
           f"in {args.dtype}; mujoco {mujoco.__version__}; cuda available: "
           f"{torch.cuda.is_available()} (not benchmarked)")
@@ -275,8 +273,6 @@ def run_ppo(args: argparse.Namespace) -> None:
     # deferred: stable-baselines3 and TensorBoard; `fignet-gym --help` imports this module
     from fignet_gym.agents.ppo.bench import ppo_throughput_table
 
-    if args.threads:
-        torch.set_num_threads(args.threads)
     table, rows = ppo_throughput_table(args.ppo_env, *args.ppo_setting, repeats=args.repeats)
     print(table)
     _write_json(args.json, {"ppo": rows})
@@ -299,8 +295,6 @@ def run_rollout(args: argparse.Namespace) -> None:
 
 def run_step(args: argparse.Namespace) -> None:
     """``bench step``: paper-size and CPU-size models against MuJoCo on the push and toss scenes."""
-    if args.threads:
-        torch.set_num_threads(args.threads)
     configs = {
         "paper (latent 128, 10 MP, mesh edges)": dict(latent_size=128, message_passing_steps=10),
         "cpu (latent 64, 5 MP, no mesh edges)": dict(latent_size=64, message_passing_steps=5,

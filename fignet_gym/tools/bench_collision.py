@@ -73,8 +73,6 @@ def _time(fn, repeats: int) -> tuple[float, float]:
 
 def run(args: argparse.Namespace) -> None:
     """``fignet-gym bench collision``: face-contact detection timings at each radius."""
-    if args.threads:
-        torch.set_num_threads(args.threads)
     rng = np.random.default_rng(0)
     pile = pile_scene(rng)
     push = push_scene().repeat(64)

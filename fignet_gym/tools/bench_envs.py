@@ -136,7 +136,6 @@ def bench_batched_step(
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """``fignet-gym bench envs``: env steps per second, single and vectorised; the rows."""
-    torch.set_num_threads(args.threads)
 
     rows: list[Row] = []
     ratios: dict[str, dict[int, float]] = {}
