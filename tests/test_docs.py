@@ -210,3 +210,13 @@ def test_cli_examples_parse(doc: Path) -> None:
 
 def test_readme_shows_cli_examples() -> None:
     assert len(_cli_examples(README)) >= 5
+
+
+def test_cli_doc_lists_every_command_and_no_other() -> None:
+    import argparse
+
+    from fignet_gym.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    listed = re.findall(r"^\| `fignet-gym ([a-z0-9-]+)`", (ROOT / "docs" / "cli.md").read_text(), re.M)
+    assert sorted(listed) == sorted(sub.choices)

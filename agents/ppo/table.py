@@ -17,6 +17,7 @@ from typing import Any
 
 from fignet_gym.agents.ppo.config import DYNAMICS
 from fignet_gym.agents.ppo.rundir import CONFIG, FINAL_EVAL, RunError
+from fignet_gym.checks import Range, check_value
 
 #: Fields of each dynamics' report the table reads.
 REPORT_FIELDS = ("success_rate", "mean_return", "n_episodes")
@@ -24,12 +25,12 @@ REPORT_FIELDS = ("success_rate", "mean_return", "n_episodes")
 CURVE_KEYS = ("success_rate", "mean_return")
 
 
-def _number(x: Any) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-
-
-def _count(x: Any, low: int) -> bool:
-    return isinstance(x, int) and not isinstance(x, bool) and x >= low
+#: Allowed values of a final evaluation's top-level fields and of each dynamics' report.
+_FINAL = {"dynamics": Range("str", choices=DYNAMICS), "timesteps": Range("int", low=0),
+          "cpu_seconds": Range("float", low=0)}
+_FINITE = Range("float")
+_REPORT = {"success_rate": Range("float", low=0, high=1), "mean_return": _FINITE,
+           "n_episodes": Range("int", low=1)}
 
 
 def read_final_eval(path: Path) -> dict[str, Any]:
@@ -52,29 +53,19 @@ def read_final_eval(path: Path) -> dict[str, Any]:
         raise ValueError(f"{path}: not a final evaluation (needs config.dynamics, timesteps, "
                          "cpu_seconds and eval.mujoco / eval.fignet with success_rate, "
                          "mean_return, n_episodes)")
-    checks = [
-        ("config.dynamics", res["config"]["dynamics"], lambda x: x in DYNAMICS, f"one of {DYNAMICS}"),
-        ("timesteps", res["timesteps"], lambda x: _count(x, 0), "an integer >= 0"),
-        ("cpu_seconds", res["cpu_seconds"], lambda x: _number(x) and x >= 0, "a number >= 0"),
-    ]
+    check_value("config.dynamics", res["config"]["dynamics"], _FINAL["dynamics"], f"{path}: ")
+    for name in ("timesteps", "cpu_seconds"):
+        check_value(name, res[name], _FINAL[name], f"{path}: ")
     for dyn in DYNAMICS:
-        rep = evals[dyn]
-        checks += [
-            (f"eval.{dyn}.success_rate", rep["success_rate"], lambda x: _number(x) and 0 <= x <= 1,
-             "a number in [0, 1]"),
-            (f"eval.{dyn}.mean_return", rep["mean_return"], _number, "a finite number"),
-            (f"eval.{dyn}.n_episodes", rep["n_episodes"], lambda x: _count(x, 1), "an integer >= 1"),
-        ]
-    for name, value, ok_value, allowed in checks:
-        if not ok_value(value):
-            raise ValueError(f"{path}: {name} must be {allowed}, got {value!r}")
+        for name in REPORT_FIELDS:
+            check_value(f"eval.{dyn}.{name}", evals[dyn][name], _REPORT[name], f"{path}: ")
     return res
 
 
 def _error_mm(report: dict[str, Any]) -> str:
     """Median final position error of an evaluation report in mm (a push's distance to the goal,
     a toss's landing distance from the target); ``-`` when the report has none."""
-    errors = [e for e in report.get("episode_position_errors", []) if _number(e)]
+    errors = [e for e in report.get("episode_position_errors", []) if _FINITE.accepts(e)]
     return f"{1000 * statistics.median(errors):.1f}" if errors else "-"
 
 

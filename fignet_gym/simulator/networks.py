@@ -52,12 +52,16 @@ def _fused_ok(x: Tensor, w: Tensor) -> bool:
     inference."""
     return (_ONEDNN and x.shape[0] >= FUSED_MIN_ROWS and x.shape[-1] <= FUSED_MAX_IN
             and w.shape[0] % 16 == 0 and x.device.type == "cpu"
-            and x.dtype == w.dtype and x.dtype in (torch.float32, torch.bfloat16)
+            and x.dtype == w.dtype and x.dtype in _FUSED_DTYPES
             and x.dim() == 2 and not torch.is_grad_enabled()
             and not torch.is_autocast_enabled("cpu"))
 
 
 _ONEDNN = torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_linear_pointwise")
+# oneDNN has no bfloat16 kernel on CPUs without AVX-512 BF16 / AMX (it fails to build one, where
+# plain F.linear falls back): the fused path takes bfloat16 only where the CPU has it.
+_FUSED_DTYPES = ((torch.float32, torch.bfloat16) if _ONEDNN and torch.ops.mkldnn._is_mkldnn_bf16_supported()
+                 else (torch.float32,))
 
 
 def linear(x: Tensor, w: Tensor, b: Tensor | None = None, relu: bool = False) -> Tensor:

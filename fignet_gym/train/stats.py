@@ -47,6 +47,8 @@ def median_ratio_interval(model: np.ndarray, ref: np.ndarray, draws: int = BOOTS
             idx = np.concatenate([members[g] for g in picks[d]])
             den = np.median(ref[idx])
             ratios[d] = np.median(model[idx]) / den if den > 0 else np.nan
+    if np.isnan(ratios).all():  # the reference never moved (a zero median): no ratio to bound
+        return [math.nan, math.nan]
     lo, hi = np.nanpercentile(ratios, INTERVAL_PERCENTILES)
     return [float(lo), float(hi)]
 
