@@ -443,3 +443,22 @@ def test_cube_toss_run_reports_landing_errors_of_the_fit_and_of_cube_real(tmp_pa
     # The two backends land the same tosses apart: the fit is not the learned model.
     errors = {dyn: res["eval"][dyn]["episode_position_errors"] for dyn in backends}
     assert errors["mujoco"] != errors["fignet"]
+
+
+@pytest.mark.parametrize(("column", "value"), [("fignet/success_rate", "1.5"), ("mujoco/mean_return", "nan")])
+def test_read_curves_refuses_a_value_out_of_its_range(tmp_path: Path, column: str, value: str) -> None:
+    from fignet_gym.agents.ppo.config import DYNAMICS
+    from fignet_gym.agents.ppo.rundir import CONFIG
+    from fignet_gym.agents.ppo.table import read_curves
+
+    (tmp_path / CONFIG).write_text(json.dumps({"dynamics": "fignet"}))
+    columns = [f"{d}/{k}" for d in DYNAMICS for k in ("success_rate", "mean_return")]
+    row = {c: "0.5" for c in columns} | {column: value}
+    (tmp_path / "eval.csv").write_text("step," + ",".join(columns) + "\n"
+                                       + "10," + ",".join(row[c] for c in columns) + "\n")
+    with pytest.raises(ValueError, match=f"line 2 has out-of-range values \\({column}\\)"):
+        read_curves(tmp_path)
+    row[column] = "0.5"
+    (tmp_path / "eval.csv").write_text("step," + ",".join(columns) + "\n"
+                                       + "10," + ",".join(row[c] for c in columns) + "\n")
+    assert read_curves(tmp_path)[1] == [10]

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 import os
 import statistics
 from collections.abc import Sequence
@@ -25,9 +24,9 @@ REPORT_FIELDS = ("success_rate", "mean_return", "n_episodes")
 CURVE_KEYS = ("success_rate", "mean_return")
 
 
-#: Allowed values of a final evaluation's top-level fields and of each dynamics' report.
-_FINAL = {"dynamics": Range("str", choices=DYNAMICS), "timesteps": Range("int", low=0),
-          "cpu_seconds": Range("float", low=0)}
+#: Allowed values of a final evaluation's top-level fields and of each dynamics' report (also
+#: the rules of ``eval.csv``'s columns).
+_FINAL = {"timesteps": Range("int", low=0), "cpu_seconds": Range("float", low=0)}
 _FINITE = Range("float")
 _REPORT = {"success_rate": Range("float", low=0, high=1), "mean_return": _FINITE,
            "n_episodes": Range("int", low=1)}
@@ -53,9 +52,9 @@ def read_final_eval(path: Path) -> dict[str, Any]:
         raise ValueError(f"{path}: not a final evaluation (needs config.dynamics, timesteps, "
                          "cpu_seconds and eval.mujoco / eval.fignet with success_rate, "
                          "mean_return, n_episodes)")
-    check_value("config.dynamics", res["config"]["dynamics"], _FINAL["dynamics"], f"{path}: ")
-    for name in ("timesteps", "cpu_seconds"):
-        check_value(name, res[name], _FINAL[name], f"{path}: ")
+    check_value("config.dynamics", res["config"]["dynamics"], Range("str", choices=DYNAMICS), f"{path}: ")
+    for name, allowed in _FINAL.items():
+        check_value(name, res[name], allowed, f"{path}: ")
     for dyn in DYNAMICS:
         for name in REPORT_FIELDS:
             check_value(f"eval.{dyn}.{name}", evals[dyn][name], _REPORT[name], f"{path}: ")
@@ -174,8 +173,7 @@ def read_curves(run: str | os.PathLike) -> tuple[str, list[int], dict[str, list[
         except (KeyError, TypeError, ValueError):
             raise ValueError(f"{path}: line {line} is incomplete or not numeric (the file is "
                              f"truncated or edited; it needs step and {', '.join(columns)})") from None
-        bad = [c for c, v in parsed.items()
-               if not math.isfinite(v) or (c.endswith("success_rate") and not 0 <= v <= 1)]
+        bad = [c for c, v in parsed.items() if not _REPORT[c.split("/")[1]].accepts(v)]
         if bad or (steps and step <= steps[-1]) or step < 0:
             raise ValueError(f"{path}: line {line} has out-of-range values "
                              f"({', '.join(bad) or 'step'})")
